@@ -1,0 +1,43 @@
+# Two commands do all set-up on a fresh machine:
+#   make demo   builds skinrs and computes weights for the bundled hand (writes out/hand_weights.png)
+#   make test   builds skinrs and runs every test (Rust unit tests, pytest, notebooks)
+PYTHON ?= python3
+VENV   ?= .venv
+PY     := $(VENV)/bin/python
+DATA   ?= $(abspath ../shared/data)
+export SKINRS_DATA := $(DATA)
+
+.PHONY: venv build demo test pytest lint bench clean
+
+$(VENV)/.deps: pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q "maturin>=1.5,<2" numpy scipy matplotlib tqdm pytest libigl gpytoolbox \
+	    clarabel osqp triangle tetgen nbmake ipykernel ruff
+	touch $@
+
+venv: $(VENV)/.deps
+
+build: venv
+	VIRTUAL_ENV=$(abspath $(VENV)) $(PY) -m maturin develop --release -q
+
+demo: build
+	$(PY) -m skinrs.demo --out out/hand_weights.png
+
+pytest: build
+	$(PY) -m pytest -q tests
+
+test: build
+	cargo test --release -q
+	$(PY) -m pytest -q tests $(wildcard notebooks/*.ipynb) --nbmake
+
+lint: venv
+	cargo fmt --check
+	cargo clippy --release -q --all-targets -- -D warnings
+	$(PY) -m ruff check python tests benches
+
+bench: build
+	$(PY) -m skinrs.bench bbw
+
+clean:
+	rm -rf $(VENV) target out

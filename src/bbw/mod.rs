@@ -1,0 +1,1 @@
+//! bbw (filled in by its issue).

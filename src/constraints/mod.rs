@@ -1,0 +1,1 @@
+//! constraints (filled in by its issue).

@@ -1,0 +1,1 @@
+//! operators (filled in by its issue).

@@ -1,0 +1,1 @@
+//! skin (filled in by its issue).
