@@ -1,5 +1,137 @@
-use pyo3::prelude::*;
+//! Bindings for boundary conditions and the BBW solvers.
 
-pub(crate) fn register(_m: &Bound<'_, PyModule>) -> PyResult<()> {
+use ndarray::Array2;
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use super::{index_array, to_pyerr, PyProgress};
+use crate::bbw::{bbw_dual, BbwOptions, EliminatedProblem, Solver};
+use crate::constraints::boundary_conditions;
+use crate::sparse::Csc;
+
+#[pyfunction]
+#[pyo3(name = "_boundary_conditions")]
+fn py_boundary_conditions<'py>(
+    py: Python<'py>,
+    v: PyReadonlyArray2<'py, f64>,
+    c: PyReadonlyArray2<'py, f64>,
+    p: PyReadonlyArray2<'py, i64>,
+    be: PyReadonlyArray2<'py, i64>,
+    tol: f64,
+) -> PyResult<(Bound<'py, PyArray1<i64>>, Bound<'py, PyArray2<f64>>)> {
+    let nc = c.as_array().nrows();
+    let p = index_array(&p, nc, "P")?;
+    let be = index_array(&be, nc, "BE")?;
+    let p: Vec<usize> = p.iter().copied().collect();
+    let (v, c) = (v.as_array(), c.as_array());
+    let r = py
+        .detach(|| boundary_conditions(v, c, &p, be.view(), tol))
+        .map_err(to_pyerr)?;
+    let b: Vec<i64> = r.b.iter().map(|&i| i as i64).collect();
+    Ok((b.into_pyarray(py), r.bc.into_pyarray(py)))
+}
+
+/// Rebuilds a CSC matrix from scipy's arrays (validated: sorted indices are not required).
+pub(crate) fn csc_from_parts(
+    data: &[f64],
+    indices: &[i64],
+    indptr: &[i64],
+    n: usize,
+) -> PyResult<Csc> {
+    use pyo3::exceptions::PyValueError;
+    if indptr.len() != n + 1 || indices.len() != data.len() || *indptr.last().unwrap_or(&0) as usize != data.len() {
+        return Err(PyValueError::new_err("B is not a valid square CSC matrix"));
+    }
+    let mut trip = Vec::with_capacity(data.len());
+    for j in 0..n {
+        let (s, e) = (indptr[j], indptr[j + 1]);
+        if s < 0 || e < s || e as usize > data.len() {
+            return Err(PyValueError::new_err("B has an invalid column pointer"));
+        }
+        for k in s as usize..e as usize {
+            let i = indices[k];
+            if i < 0 || i as usize >= n {
+                return Err(PyValueError::new_err(format!("B has row index {i} outside 0..{n}")));
+            }
+            if !data[k].is_finite() {
+                return Err(PyValueError::new_err("B has a NaN or infinite entry"));
+            }
+            trip.push(faer::sparse::Triplet::new(i as usize, j, data[k]));
+        }
+    }
+    crate::sparse::from_triplets(n, n, &trip).map_err(to_pyerr)
+}
+
+#[pyfunction]
+#[pyo3(name = "_bbw_dual")]
+#[allow(clippy::too_many_arguments)]
+fn py_bbw_dual<'py>(
+    py: Python<'py>,
+    b_data: PyReadonlyArray1<'py, f64>,
+    b_indices: PyReadonlyArray1<'py, i64>,
+    b_indptr: PyReadonlyArray1<'py, i64>,
+    n: usize,
+    b: PyReadonlyArray1<'py, i64>,
+    bc: PyReadonlyArray2<'py, f64>,
+    solver: &str,
+    tol: f64,
+    max_iter: usize,
+    partition_of_unity: bool,
+    seed: u64,
+    callback: Option<Py<PyAny>>,
+) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, PyDict>)> {
+    let bmat = csc_from_parts(
+        b_data.as_slice()?,
+        b_indices.as_slice()?,
+        b_indptr.as_slice()?,
+        n,
+    )?;
+    let b_idx: Vec<usize> = b
+        .as_array()
+        .iter()
+        .map(|&i| {
+            if i < 0 || i as u64 >= n as u64 {
+                Err(pyo3::exceptions::PyValueError::new_err(format!("b holds index {i}, outside 0..{n}")))
+            } else {
+                Ok(i as usize)
+            }
+        })
+        .collect::<PyResult<_>>()?;
+    let bc = bc.as_array().to_owned();
+    let opts = BbwOptions {
+        solver: Solver::parse(solver).map_err(to_pyerr)?,
+        tol,
+        max_iter,
+        partition_of_unity,
+        seed,
+        ..Default::default()
+    };
+    let mut progress = PyProgress::new(callback);
+    let (w, info): (Array2<f64>, _) = py
+        .detach(|| {
+            let prob = EliminatedProblem::new(&bmat, &b_idx, bc.view())?;
+            bbw_dual(&prob, &opts, &mut progress)
+        })
+        .map_err(to_pyerr)?;
+    let d = PyDict::new(py);
+    d.set_item("solver", info.solver)?;
+    d.set_item("iterations", info.iterations)?;
+    d.set_item("energy", info.energy)?;
+    d.set_item("lower_bound", info.lower_bound)?;
+    d.set_item("dual_objective", info.dual_objective)?;
+    d.set_item("gap", info.gap)?;
+    d.set_item("relative_gap", info.relative_gap)?;
+    d.set_item("min_raw_weight", info.min_raw_weight)?;
+    d.set_item("max_raw_weight", info.max_raw_weight)?;
+    d.set_item("converged", info.converged)?;
+    d.set_item("time_factor", info.time_factor)?;
+    d.set_item("time_solve", info.time_solve)?;
+    Ok((w.into_pyarray(py), d))
+}
+
+pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(py_boundary_conditions, m)?)?;
+    m.add_function(wrap_pyfunction!(py_bbw_dual, m)?)?;
     Ok(())
 }
