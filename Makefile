@@ -13,7 +13,7 @@ $(VENV)/.deps: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q "maturin>=1.5,<2" numpy scipy matplotlib tqdm pytest libigl gpytoolbox \
-	    clarabel osqp triangle tetgen nbmake ipykernel ruff
+	    clarabel osqp triangle tetgen nbmake ipykernel ruff meshio trimesh
 	touch $@
 
 venv: $(VENV)/.deps

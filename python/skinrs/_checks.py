@@ -14,7 +14,7 @@ def as_points(X, name: str = "V", dims=(2, 3), min_rows: int = 1) -> np.ndarray:
     """Float64 C-contiguous ``(n, d)`` array with ``d`` in ``dims`` and only finite entries."""
     try:
         A = np.asarray(X)
-    except Exception as e:  # ragged lists and the like
+    except (TypeError, ValueError) as e:  # ragged lists and the like
         raise ValueError(f"{name} must be an (n, d) array of numbers: {e}") from None
     if A.dtype == object or not (np.issubdtype(A.dtype, np.number) or A.dtype == bool):
         raise ValueError(f"{name} must hold numbers, got dtype {A.dtype}")
@@ -46,15 +46,18 @@ def as_index_array(X, n: int, name: str, cols=None, ndim: int = 2, allow_empty=T
         return np.zeros(shape, dtype=np.int64)
     if A.dtype == bool or not np.issubdtype(A.dtype, np.number) or np.iscomplexobj(A):
         raise ValueError(f"{name} must hold integer indices, got dtype {A.dtype}")
-    if not np.issubdtype(A.dtype, np.integer):
-        if not np.all(np.isfinite(A)) or np.any(A != np.round(A)):
-            raise ValueError(f"{name} must hold integer indices, got non-integral values")
+    if not np.issubdtype(A.dtype, np.integer) and (
+        not np.all(np.isfinite(A)) or np.any(A != np.round(A))
+    ):
+        raise ValueError(f"{name} must hold integer indices, got non-integral values")
     if A.ndim != ndim:
         raise ValueError(f"{name} must be {ndim}-dimensional, got shape {A.shape}")
     if ndim == 2 and cols is not None:
         allowed = (cols,) if isinstance(cols, int) else tuple(cols)
         if A.shape[1] not in allowed:
-            raise ValueError(f"{name} must have {' or '.join(map(str, allowed))} columns, got {A.shape}")
+            raise ValueError(
+                f"{name} must have {' or '.join(map(str, allowed))} columns, got {A.shape}"
+            )
     A = np.ascontiguousarray(A, dtype=np.int64)
     lo, hi = int(A.min()), int(A.max())
     if lo < 0 or hi >= n:

@@ -45,7 +45,11 @@ pub fn pou_eval(p: &EliminatedProblem, y: &[f64]) -> DualPoint {
     let wy: f64 = w.iter().zip(y).map(|(a, b)| a * b).sum();
     let ysum: f64 = y.iter().sum();
     let lower_bound = 0.5 * wg - 0.5 * wy - ysum / (2.0 * m as f64) + p.c0;
-    DualPoint { objective, w, lower_bound }
+    DualPoint {
+        objective,
+        w,
+        lower_bound,
+    }
 }
 
 /// Evaluates the box dual (no partition of unity) at `y, u` (each `nf x m`, `>= 0`).
@@ -57,7 +61,11 @@ pub fn box_eval(p: &EliminatedProblem, y: &[f64], u: &[f64]) -> DualPoint {
     let usum: f64 = u.iter().sum();
     let objective = 0.5 * dot(&ymu, &x) + dot(&p.w0, &ymu) + usum;
     let lower_bound = 0.5 * dot(&w, &p.g) - 0.5 * dot(&w, &ymu) - usum + p.c0;
-    DualPoint { objective, w, lower_bound }
+    DualPoint {
+        objective,
+        w,
+        lower_bound,
+    }
 }
 
 /// Projects recovered weights onto the partition-of-unity feasible set: clamp below at 0 and
@@ -68,7 +76,11 @@ pub fn project_pou(w: &[f64], nf: usize, m: usize) -> Vec<f64> {
     for i in 0..nf {
         let s: f64 = (0..m).map(|c| out[c * nf + i]).sum();
         for c in 0..m {
-            out[c * nf + i] = if s > 0.0 { out[c * nf + i] / s } else { 1.0 / m as f64 };
+            out[c * nf + i] = if s > 0.0 {
+                out[c * nf + i] / s
+            } else {
+                1.0 / m as f64
+            };
         }
     }
     out

@@ -70,7 +70,11 @@ pub fn minimize(
                     yv[i] = g_new[i] - g[i];
                 }
                 let sy: f64 = s.iter().zip(&yv).map(|(a, b)| a * b).sum();
-                if sy > 1e-16 * s.iter().map(|v| v * v).sum::<f64>().sqrt() * yv.iter().map(|v| v * v).sum::<f64>().sqrt() {
+                if sy
+                    > 1e-16
+                        * s.iter().map(|v| v * v).sum::<f64>().sqrt()
+                        * yv.iter().map(|v| v * v).sum::<f64>().sqrt()
+                {
                     if s_hist.len() == opts.memory {
                         s_hist.remove(0);
                         y_hist.remove(0);
@@ -116,6 +120,8 @@ fn two_loop(g: &[f64], s: &[Vec<f64>], y: &[Vec<f64>], rho: &[f64], d: &mut [f64
     }
     for i in 0..k {
         let beta = rho[i] * y[i].iter().zip(d.iter()).map(|(p, q)| p * q).sum::<f64>();
-        d.iter_mut().zip(&s[i]).for_each(|(di, si)| *di += (alpha[i] - beta) * si);
+        d.iter_mut()
+            .zip(&s[i])
+            .for_each(|(di, si)| *di += (alpha[i] - beta) * si);
     }
 }

@@ -105,8 +105,9 @@ impl EliminatedProblem {
             }
         }
         let a = from_triplets(nf, nf, &trip)?;
-        let symbolic = SymbolicLlt::try_new(a.symbolic(), Side::Lower)
-            .map_err(|e| SkinError::Numerical(format!("symbolic Cholesky of B_ff failed: {e:?}")))?;
+        let symbolic = SymbolicLlt::try_new(a.symbolic(), Side::Lower).map_err(|e| {
+            SkinError::Numerical(format!("symbolic Cholesky of B_ff failed: {e:?}"))
+        })?;
         let llt = Llt::try_new_with_symbolic(symbolic, a.as_ref(), Side::Lower).map_err(|e| {
             SkinError::Numerical(format!(
                 "B_ff is not positive definite ({e:?}); check for degenerate elements or a \
@@ -157,18 +158,20 @@ impl EliminatedProblem {
         if nf == 0 {
             return y;
         }
-        y.par_chunks_mut(nf).zip(x.par_chunks(nf)).for_each(|(yc, xc)| {
-            for j in 0..nf {
-                let xj = xc[j];
-                if xj == 0.0 {
-                    continue;
+        y.par_chunks_mut(nf)
+            .zip(x.par_chunks(nf))
+            .for_each(|(yc, xc)| {
+                for j in 0..nf {
+                    let xj = xc[j];
+                    if xj == 0.0 {
+                        continue;
+                    }
+                    let rows = self.a.symbolic().row_idx_of_col_raw(j);
+                    for (&i, &v) in rows.iter().zip(self.a.val_of_col(j)) {
+                        yc[i] += v * xj;
+                    }
                 }
-                let rows = self.a.symbolic().row_idx_of_col_raw(j);
-                for (&i, &v) in rows.iter().zip(self.a.val_of_col(j)) {
-                    yc[i] += v * xj;
-                }
-            }
-        });
+            });
         y
     }
 

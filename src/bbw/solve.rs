@@ -98,7 +98,11 @@ pub fn bbw_dual(
     }
     let t0 = Instant::now();
     let (nf, m) = (prob.nf(), prob.m);
-    let nvar = if opts.partition_of_unity { nf * m } else { 2 * nf * m };
+    let nvar = if opts.partition_of_unity {
+        nf * m
+    } else {
+        2 * nf * m
+    };
 
     let eval = |y: &[f64]| -> DualPoint {
         if opts.partition_of_unity {
@@ -134,19 +138,38 @@ pub fn bbw_dual(
             *last.borrow_mut() = Some(dp);
             f
         };
-        let lopts = LbfgsOptions { memory: opts.memory, max_iter: opts.max_iter };
+        let lopts = LbfgsOptions {
+            memory: opts.memory,
+            max_iter: opts.max_iter,
+        };
         iterations = minimize(&mut u, &lopts, fg, |it, _x, _f, _g| {
             let dp = last.borrow();
             let dp = dp.as_ref().expect("objective evaluated before monitor");
             let feasible = project(&dp.w);
             let upper = prob.energy(&feasible);
             best.update(dp, feasible, upper);
-            progress.report(Event { stage: "dual", iteration: it, value: best.relative_gap() })?;
-            Ok(if best.relative_gap() <= opts.tol { Step::Stop } else { Step::Continue })
+            progress.report(Event {
+                stage: "dual",
+                iteration: it,
+                value: best.relative_gap(),
+            })?;
+            Ok(if best.relative_gap() <= opts.tol {
+                Step::Stop
+            } else {
+                Step::Continue
+            })
         })?;
     } else {
         // Every vertex is constrained: nothing to solve.
-        best.update(&DualPoint { objective: 0.0, w: vec![], lower_bound: prob.c0 }, vec![], prob.c0);
+        best.update(
+            &DualPoint {
+                objective: 0.0,
+                w: vec![],
+                lower_bound: prob.c0,
+            },
+            vec![],
+            prob.c0,
+        );
     }
 
     let info = BbwInfo {

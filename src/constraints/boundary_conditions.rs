@@ -105,7 +105,11 @@ pub fn boundary_conditions(
     Ok(BoundaryConditions { b, bc })
 }
 
-fn check_distinct_handles(c: ArrayView2<f64>, p: &[usize], be: ArrayView2<usize>) -> SkinResult<()> {
+fn check_distinct_handles(
+    c: ArrayView2<f64>,
+    p: &[usize],
+    be: ArrayView2<usize>,
+) -> SkinResult<()> {
     for i in 0..p.len() {
         for j in 0..i {
             if c.row(p[i]) == c.row(p[j]) {
@@ -129,7 +133,10 @@ fn check_distinct_handles(c: ArrayView2<f64>, p: &[usize], be: ArrayView2<usize>
             let same_pos = |x: usize, y: usize| c.row(x) == c.row(y);
             let (a, b) = (be[[e, 0]], be[[e, 1]]);
             let (x, y) = (be[[f, 0]], be[[f, 1]]);
-            if key(f) == Some(ke) || (same_pos(a, x) && same_pos(b, y)) || (same_pos(a, y) && same_pos(b, x)) {
+            if key(f) == Some(ke)
+                || (same_pos(a, x) && same_pos(b, y))
+                || (same_pos(a, y) && same_pos(b, x))
+            {
                 return invalid!("bones {f} and {e} coincide");
             }
         }
@@ -186,7 +193,14 @@ mod tests {
 
     #[test]
     fn joint_is_shared_between_bones() {
-        let v = array![[0.0, 0.0], [0.5, 0.0], [1.0, 0.0], [1.5, 0.0], [2.0, 0.0], [1.0, 1.0]];
+        let v = array![
+            [0.0, 0.0],
+            [0.5, 0.0],
+            [1.0, 0.0],
+            [1.5, 0.0],
+            [2.0, 0.0],
+            [1.0, 1.0]
+        ];
         let c = array![[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]];
         let be = array![[0usize, 1], [1, 2]];
         let r = boundary_conditions(v.view(), c.view(), &[], be.view(), DEFAULT_TOL).unwrap();

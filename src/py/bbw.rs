@@ -40,7 +40,10 @@ pub(crate) fn csc_from_parts(
     n: usize,
 ) -> PyResult<Csc> {
     use pyo3::exceptions::PyValueError;
-    if indptr.len() != n + 1 || indices.len() != data.len() || *indptr.last().unwrap_or(&0) as usize != data.len() {
+    if indptr.len() != n + 1
+        || indices.len() != data.len()
+        || *indptr.last().unwrap_or(&0) as usize != data.len()
+    {
         return Err(PyValueError::new_err("B is not a valid square CSC matrix"));
     }
     let mut trip = Vec::with_capacity(data.len());
@@ -52,7 +55,9 @@ pub(crate) fn csc_from_parts(
         for k in s as usize..e as usize {
             let i = indices[k];
             if i < 0 || i as usize >= n {
-                return Err(PyValueError::new_err(format!("B has row index {i} outside 0..{n}")));
+                return Err(PyValueError::new_err(format!(
+                    "B has row index {i} outside 0..{n}"
+                )));
             }
             if !data[k].is_finite() {
                 return Err(PyValueError::new_err("B has a NaN or infinite entry"));
@@ -92,7 +97,9 @@ fn py_bbw_dual<'py>(
         .iter()
         .map(|&i| {
             if i < 0 || i as u64 >= n as u64 {
-                Err(pyo3::exceptions::PyValueError::new_err(format!("b holds index {i}, outside 0..{n}")))
+                Err(pyo3::exceptions::PyValueError::new_err(format!(
+                    "b holds index {i}, outside 0..{n}"
+                )))
             } else {
                 Ok(i as usize)
             }
