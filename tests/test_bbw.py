@@ -1,0 +1,219 @@
+"""BBW core against independent references.
+
+- PoU weights against a generic QP (clarabel, tightened, then KKT-polished) stored as fixtures by
+  ``tests/reference/make_qp_reference.py``;
+- the no-PoU variant against libigl's own test oracle (MATLAB active set) for decimated-knight;
+- boundary conditions against an independent Python reading of libigl's ``boundary_conditions``;
+- the bad-input contract.
+"""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import skinrs
+
+REF = Path(__file__).parent / "reference"
+QP_CASES = [p.stem for p in sorted(REF.glob("*.npz")) if "W_qp" in np.load(p).files]
+SOLVERS = skinrs.bbw.SOLVERS
+TOL = 1e-8  # relative duality gap asked of the solver
+
+
+def load(case):
+    z = np.load(REF / f"{case}.npz")
+    return {k: z[k] for k in z.files}
+
+
+@pytest.mark.parametrize("case", QP_CASES)
+def test_boundary_conditions_match_independent_reference(case):
+    f = load(case)
+    b, bc = skinrs.boundary_conditions(f["V"], f["C"], P=f["P"], BE=f["BE"])
+    np.testing.assert_array_equal(b, f["b"])
+    np.testing.assert_allclose(bc, f["bc"], rtol=0, atol=1e-15)
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+@pytest.mark.parametrize("case", QP_CASES)
+def test_pou_weights_match_qp(case, solver):
+    f = load(case)
+    W, info = skinrs.bbw_dual_constrained(
+        f["V"],
+        f["T"],
+        f["b"],
+        f["bc"],
+        mass=str(f["mass_kind"]),
+        solver=solver,
+        tol=TOL,
+        return_info=True,
+    )
+    E_qp = float(f["energy"])
+    dW = np.abs(W - f["W_qp"]).max()
+    relE = (info["energy"] - E_qp) / E_qp
+    print(f"{case} {solver}: {info['iterations']} it, max|dW| {dW:.2e}, rel energy {relE:.2e}")
+    assert info["converged"]
+    assert dW <= 1e-4
+    assert abs(relE) <= 1e-6
+    # The certificate brackets the independent optimum.
+    assert info["lower_bound"] <= E_qp * (1 + 1e-12) and E_qp <= info["energy"] * (1 + 1e-12)
+    # Constraints hold to rounding.
+    assert W.min() >= 0
+    np.testing.assert_allclose(W.sum(1), 1, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(W[f["b"]], f["bc"])
+    # The reported energy is the energy of the returned weights.
+    B = skinrs.biharmonic_matrix(f["V"], f["T"], mass=str(f["mass_kind"]))
+    assert skinrs.biharmonic_energy(W, B) == pytest.approx(info["energy"], rel=1e-10)
+
+
+def test_no_pou_reproduces_libigl_test_oracle(data_dir):
+    """libigl's tests/include/igl/bbw.cpp: bbw on decimated-knight equals the MATLAB active-set
+    weights to 1e-4 (raw, not normalised). libigl's bbw uses its default mass matrix, which is
+    barycentric for tets."""
+    d = data_dir / "decimated-knight"
+    V, T, _ = skinrs.io.read_mesh(d / "decimated-knight.mesh")
+    C, BE = skinrs.io.read_tgf(d / "decimated-knight.tgf")
+    W_ref = skinrs.io.read_dmat(d / "decimated-knight-matlab-active-set.dmat")
+    W, info = skinrs.bbw_dual(
+        V,
+        T,
+        C,
+        BE=BE,
+        partition_of_unity=False,
+        normalize=False,
+        mass="barycentric",
+        tol=1e-9,
+        return_info=True,
+    )
+    err = np.abs(W - W_ref).max()
+    print(f"knight no-PoU: {info['iterations']} it, max|dW| vs oracle {err:.2e}")
+    assert err <= 1e-4
+    assert W.min() >= 0 and W.max() <= 1
+    # Normalised variant: rows sum to one.
+    Wn = skinrs.bbw_dual(V, T, C, BE=BE, partition_of_unity=False, mass="barycentric", tol=1e-6)
+    np.testing.assert_allclose(Wn.sum(1), 1, atol=1e-12)
+
+
+def test_pou_energy_is_below_libigl_normalised_weights():
+    """libigl's bbw ignores PoU; its normalised weights have a higher energy than ours."""
+    igl = pytest.importorskip("igl")
+    f = load("knight")
+    W, info = skinrs.bbw_dual_constrained(
+        f["V"], f["T"], f["b"], f["bc"], tol=1e-7, return_info=True
+    )
+    B = skinrs.biharmonic_matrix(f["V"], f["T"])
+    Wi = f["W_nopou_matlab"]
+    Wi = np.clip(Wi, 0, None) / np.clip(Wi, 0, None).sum(1, keepdims=True)
+    E_igl = skinrs.biharmonic_energy(Wi, B)
+    print(f"knight energy: skinrs {info['energy']:.8f}, normalised no-PoU {E_igl:.8f}")
+    assert info["energy"] < E_igl
+    assert igl is not None
+
+
+# ------------------------------------------------------------------------------------------
+# Small meshes for the contract tests
+# ------------------------------------------------------------------------------------------
+
+
+def grid(k=8):
+    x, y = np.meshgrid(np.linspace(0, 1, k), np.linspace(0, 1, k))
+    V = np.c_[x.ravel(), y.ravel()]
+    T = []
+    for j in range(k - 1):
+        for i in range(k - 1):
+            a = i + k * j
+            T += [[a, a + 1, a + k + 1], [a, a + k + 1, a + k]]
+    return V, np.array(T)
+
+
+def test_small_problem_properties():
+    V, T = grid(10)
+    b = np.array([0, 9, 90, 99])
+    W = skinrs.bbw_dual_constrained(V, T, b, np.eye(4), tol=1e-10)
+    assert W.shape == (100, 4) and W.min() >= 0
+    np.testing.assert_allclose(W.sum(1), 1, atol=1e-12)
+    # The grid's diagonals run along y = x, so swapping x and y is a symmetry of the mesh that
+    # swaps corners 9 and 90: their weight functions must be transposes of each other.
+    i = np.arange(100)
+    transpose = (i % 10) * 10 + i // 10
+    np.testing.assert_allclose(W[transpose, 1], W[:, 2], atol=1e-5)
+
+
+def test_callback_can_stop_and_reports_progress():
+    V, T = grid(12)
+    seen = []
+
+    def cb(stage, it, value):
+        seen.append((stage, it, value))
+        return False
+
+    with pytest.raises(KeyboardInterrupt):
+        skinrs.bbw_dual_constrained(V, T, [0, 143], np.eye(2), tol=1e-14, callback=cb)
+    assert seen and seen[0][0] == "dual"
+
+
+def test_max_iter_warns_and_still_returns_feasible_weights():
+    V, T = grid(12)
+    with pytest.warns(RuntimeWarning, match="duality gap"):
+        W = skinrs.bbw_dual_constrained(V, T, [0, 143], np.eye(2), tol=1e-14, max_iter=3)
+    assert W.min() >= 0
+    np.testing.assert_allclose(W.sum(1), 1, atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    "mutate, match",
+    [
+        (lambda V, T, b, bc: (np.where(V == V[3, 0], np.nan, V), T, b, bc), "NaN"),
+        (lambda V, T, b, bc: (V[:, :1], T, b, bc), "shape"),
+        (lambda V, T, b, bc: (V, T.astype(float) + 0.5, b, bc), "integer"),
+        (lambda V, T, b, bc: (V, T, [0, 1000], bc), "outside"),
+        (lambda V, T, b, bc: (V, T, [0, 0], bc), "more than once"),
+        (lambda V, T, b, bc: (V, T, b, bc[:1]), "one row per"),
+        (lambda V, T, b, bc: (V, T, b, 2 * bc), "sums to"),
+        (lambda V, T, b, bc: (V, T, b, -bc), "negative"),
+        (lambda V, T, b, bc: (V, np.vstack([T, [[0, 1, 2]]]), b, bc), "degenerate"),
+    ],
+)
+def test_bad_input_raises_value_error(mutate, match):
+    V, T = grid(5)
+    b, bc = np.array([0, 24]), np.eye(2)
+    V2, T2, b2, bc2 = mutate(V, T, b, bc)
+    with pytest.raises(ValueError, match=match):
+        skinrs.bbw_dual_constrained(V2, T2, b2, bc2)
+
+
+def test_component_without_handle_is_an_error():
+    V, T = grid(5)
+    V2 = np.vstack([V, V + [3, 0]])
+    T2 = np.vstack([T, T + 25])
+    with pytest.raises(ValueError, match="no constrained"):
+        skinrs.bbw_dual_constrained(V2, T2, [0, 24], np.eye(2))
+
+
+def test_bad_options_raise():
+    V, T = grid(5)
+    for kw, match in [
+        ({"solver": "mosek"}, "solver"),
+        ({"tol": -1}, "tol"),
+        ({"max_iter": 0}, "max_iter"),
+        ({"mass": "cotan"}, "voronoi"),
+        ({"callback": 3}, "callable"),
+    ]:
+        with pytest.raises(ValueError, match=match):
+            skinrs.bbw_dual_constrained(V, T, [0, 24], np.eye(2), **kw)
+
+
+def test_handle_errors_are_named():
+    V, T = grid(5)
+    C = np.array([[0.0, 0.0], [1.0, 1.0], [0.5, 0.55], [0.0, 0.0]])
+    with pytest.raises(ValueError, match="point handle 1"):
+        skinrs.bbw_dual(V, T, C, P=[0, 2])  # (0.5, 0.55) is not a vertex
+    with pytest.raises(ValueError, match="same position"):
+        skinrs.bbw_dual(V, T, C, P=[0, 3])
+    with pytest.raises(ValueError, match="coincide"):
+        skinrs.bbw_dual(V, T, C, BE=[[0, 1], [1, 0]])
+    with pytest.raises(ValueError, match="zero length"):
+        skinrs.bbw_dual(V, T, C, BE=[[0, 3]])
+    with pytest.raises(ValueError, match="outside"):
+        skinrs.bbw_dual(V, T, C, BE=[[0, 7]])
+    with pytest.raises(ValueError, match="no handles"):
+        skinrs.bbw_dual(V, T, C)
