@@ -1,0 +1,147 @@
+"""``python -m skinrs.bench bbw``: BBW solvers side by side, measured in one run.
+
+For each case (a QP fixture in ``tests/reference``: V, T, b, bc and, where affordable, the
+tight QP optimum ``W_qp``/``energy``) it prints time, iterations, energy, relative energy above
+the QP optimum and max |dW| against the QP for:
+
+- skinrs ``bbw_dual_constrained`` with each solver at ``tol`` 1e-6 (the energy is then
+  *certified* within 1e-6 of the optimum by the duality gap) and 1e-8;
+- the paper's method re-implemented with SciPy (``paper_reference``: SuperLU on the full KKT
+  matrix + SciPy L-BFGS on squares) at its own tol 1e-6 and at 1e-10;
+- ``igl.bbw`` (no partition of unity, rows normalised afterwards) with max_iter 8 and 100;
+
+and the speed ratios of skinrs against the SciPy reference. Not a test: nothing is asserted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .. import bbw as _bbw
+from .. import biharmonic_energy, biharmonic_matrix, bbw_dual_constrained
+
+ROOT = Path(__file__).resolve().parents[3]
+FIXTURES = ROOT / "tests" / "reference"
+
+
+def _load(case):
+    z = np.load(FIXTURES / f"{case}.npz")
+    return {k: z[k] for k in z.files}
+
+
+def _row(name, seconds, W, B, f, iterations=None):
+    E = biharmonic_energy(W, B)
+    row = {"method": name, "time_s": seconds, "iterations": iterations, "energy": E}
+    if "energy" in f:
+        row["rel_energy"] = (E - float(f["energy"])) / float(f["energy"])
+    if "W_qp" in f:
+        row["max_dW"] = float(np.abs(W - f["W_qp"]).max())
+    return row
+
+
+def run_case(case, slow=True):
+    from . import paper_reference
+
+    f = _load(case)
+    V, T, b, bc = f["V"], f["T"], f["b"], f["bc"]
+    B = biharmonic_matrix(V, T)
+    rows = []
+    for solver in _bbw.SOLVERS:
+        for tol in (1e-6, 1e-8):
+            t = time.perf_counter()
+            W, info = bbw_dual_constrained(V, T, b, bc, solver=solver, tol=tol, return_info=True)
+            rows.append(
+                _row(
+                    f"skinrs {solver} tol {tol:g}",
+                    time.perf_counter() - t,
+                    W,
+                    B,
+                    f,
+                    info["iterations"],
+                )
+            )
+    for tol in (1e-6, 1e-10) if slow else (1e-6,):
+        t = time.perf_counter()
+        _, W, info = paper_reference.paper_dual_lbfgs(V, T, b, bc, tol=tol)
+        rows.append(
+            _row(
+                f"SciPy paper method tol {tol:g}",
+                time.perf_counter() - t,
+                W,
+                B,
+                f,
+                info.get("iterations"),
+            )
+        )
+    try:
+        import igl
+    except ImportError:
+        igl = None
+    if igl is not None:
+        for it in (8, 100):
+            t = time.perf_counter()
+            Wi = igl.bbw(
+                np.ascontiguousarray(V),
+                np.ascontiguousarray(T, dtype=np.int64),
+                np.ascontiguousarray(b, dtype=np.int64),
+                np.ascontiguousarray(bc),
+                max_iter=it,
+            )
+            dt = time.perf_counter() - t
+            Wi = np.clip(Wi, 0, None)
+            Wi = Wi / Wi.sum(1, keepdims=True)
+            rows.append(_row(f"igl.bbw max_iter {it} (normalised)", dt, Wi, B, f))
+    return rows
+
+
+def _fmt(x, spec):
+    return "-" if x is None or (isinstance(x, float) and np.isnan(x)) else format(x, spec)
+
+
+def print_table(case, rows):
+    print(f"\n### {case}\n")
+    print("| method | time (s) | iterations | energy | rel. energy vs QP | max abs dW vs QP |")
+    print("|---|---:|---:|---:|---:|---:|")
+    for r in rows:
+        print(
+            f"| {r['method']} | {r['time_s']:.2f} | {_fmt(r['iterations'], 'd')} | "
+            f"{r['energy']:.10g} | {_fmt(r.get('rel_energy'), '.1e')} | "
+            f"{_fmt(r.get('max_dW'), '.1e')} |"
+        )
+    by = {r["method"]: r for r in rows}
+    for solver in _bbw.SOLVERS:
+        ours = by.get(f"skinrs {solver} tol 1e-06")
+        for ref in ("SciPy paper method tol 1e-06", "SciPy paper method tol 1e-10"):
+            if ours and ref in by:
+                print(
+                    f"\nspeed-up of skinrs {solver} (certified 1e-6) over {ref}: "
+                    f"{by[ref]['time_s'] / ours['time_s']:.1f}x"
+                )
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m skinrs.bench bbw", description=__doc__)
+    ap.add_argument(
+        "cases",
+        nargs="*",
+        default=["hand", "big2d"],
+        help="fixture names in tests/reference (default: hand big2d)",
+    )
+    ap.add_argument("--fast", action="store_true", help="skip the SciPy reference at tol 1e-10")
+    args = ap.parse_args(argv)
+    for case in args.cases:
+        if not (FIXTURES / f"{case}.npz").exists():
+            print(
+                f"no fixture tests/reference/{case}.npz; run tests/reference/make_qp_reference.py"
+            )
+            continue
+        print_table(case, run_case(case, slow=not args.fast))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,14 @@
+"""Small bundled data for the demo (the libigl tutorial 403 hand)."""
+
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+
+
+def hand():
+    """``(V, T, F, C, BE)`` of the libigl tutorial 403 hand (7,234 vertices, 20 bones)."""
+    from .. import io
+
+    V, T, F = io.read_mesh(HERE / "hand" / "hand.mesh")
+    C, BE = io.read_tgf(HERE / "hand" / "hand.tgf")
+    return V, T, F, C, BE
