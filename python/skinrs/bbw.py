@@ -101,6 +101,7 @@ def bbw_dual_constrained(
     tol=1e-9,
     max_iter=100_000,
     seed=0,
+    lbfgs_memory=10,
     verbose=False,
     callback=None,
     return_info=False,
@@ -136,6 +137,8 @@ def bbw_dual_constrained(
         Iteration cap; a warning is issued if the gap is still above ``tol`` then.
     seed : int
         Seed of the random start (the paper's), for reproducible results.
+    lbfgs_memory : int
+        Number of L-BFGS correction pairs (SciPy's default, 10, is the paper's setting).
     verbose : bool
         Print progress (gap per iteration, throttled) and a summary to stderr.
     callback : callable, optional
@@ -191,6 +194,7 @@ def bbw_dual_constrained(
         raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
     tol = _checks.positive_float(tol, "tol")
     max_iter = _checks.positive_int(max_iter, "max_iter")
+    lbfgs_memory = _checks.positive_int(lbfgs_memory, "lbfgs_memory")
     if callback is not None and not callable(callback):
         raise ValueError("callback must be callable")
 
@@ -211,6 +215,7 @@ def bbw_dual_constrained(
         max_iter,
         bool(partition_of_unity),
         int(seed),
+        int(lbfgs_memory),
         cb,
     )
     info["time_operators"] = t_ops

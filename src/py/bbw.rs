@@ -84,6 +84,7 @@ fn py_bbw_dual<'py>(
     max_iter: usize,
     partition_of_unity: bool,
     seed: u64,
+    memory: usize,
     callback: Option<Py<PyAny>>,
 ) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, PyDict>)> {
     let bmat = csc_from_parts(
@@ -112,7 +113,7 @@ fn py_bbw_dual<'py>(
         max_iter,
         partition_of_unity,
         seed,
-        ..Default::default()
+        memory: memory.max(1),
     };
     let mut progress = PyProgress::new(callback);
     let (w, info): (Array2<f64>, _) = py

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import bbw as _bbw
-from .. import biharmonic_energy, biharmonic_matrix, bbw_dual_constrained
+from .. import bbw_dual_constrained, biharmonic_energy, biharmonic_matrix
 
 ROOT = Path(__file__).resolve().parents[3]
 FIXTURES = ROOT / "tests" / "reference"
