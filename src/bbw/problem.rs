@@ -147,8 +147,14 @@ impl EliminatedProblem {
             return;
         }
         let cols = x.len() / nf;
-        let mat = MatMut::from_column_major_slice_mut(x, nf, cols);
-        self.llt.solve_in_place(mat);
+        // The factor is shared read-only; independent right-hand sides are split across the
+        // rayon threads (faer itself runs sequentially, see `py::_skinrs`).
+        let per = cols.div_ceil(rayon::current_num_threads()).max(1);
+        x.par_chunks_mut(per * nf).for_each(|chunk| {
+            let k = chunk.len() / nf;
+            let mat = MatMut::from_column_major_slice_mut(chunk, nf, k);
+            self.llt.solve_in_place(mat);
+        });
     }
 
     /// `A x` for an `nf x k` column-major block (parallel over columns).
