@@ -34,7 +34,8 @@ test: build
 lint: venv
 	cargo fmt --check
 	cargo clippy --release -q --all-targets -- -D warnings
-	$(PY) -m ruff check python tests benches
+	$(PY) -m ruff check python tests
+	$(PY) -m ruff format --check python tests
 
 bench: build
 	$(PY) -m skinrs.bench bbw

@@ -167,8 +167,7 @@ impl EliminatedProblem {
         y.par_chunks_mut(nf)
             .zip(x.par_chunks(nf))
             .for_each(|(yc, xc)| {
-                for j in 0..nf {
-                    let xj = xc[j];
+                for (j, &xj) in xc.iter().enumerate() {
                     if xj == 0.0 {
                         continue;
                     }
@@ -228,8 +227,8 @@ fn check_components(bmat: &Csc, is_b: &[usize]) -> SkinResult<()> {
         }
     }
     let mut has_b = vec![false; n];
-    for i in 0..n {
-        if is_b[i] != usize::MAX {
+    for (i, &bi) in is_b.iter().enumerate() {
+        if bi != usize::MAX {
             let r = find(&mut parent, i);
             has_b[r] = true;
         }

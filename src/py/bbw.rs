@@ -10,6 +10,8 @@ use crate::bbw::{bbw_dual, BbwOptions, EliminatedProblem, Solver};
 use crate::constraints::boundary_conditions;
 use crate::sparse::Csc;
 
+type BoundaryConditionsOut<'py> = (Bound<'py, PyArray1<i64>>, Bound<'py, PyArray2<f64>>);
+
 #[pyfunction]
 #[pyo3(name = "_boundary_conditions")]
 fn py_boundary_conditions<'py>(
@@ -19,7 +21,7 @@ fn py_boundary_conditions<'py>(
     p: PyReadonlyArray2<'py, i64>,
     be: PyReadonlyArray2<'py, i64>,
     tol: f64,
-) -> PyResult<(Bound<'py, PyArray1<i64>>, Bound<'py, PyArray2<f64>>)> {
+) -> PyResult<BoundaryConditionsOut<'py>> {
     let nc = c.as_array().nrows();
     let p = index_array(&p, nc, "P")?;
     let be = index_array(&be, nc, "BE")?;
