@@ -1,0 +1,404 @@
+"""Regenerate the bounded-biharmonic-weights QP reference fixtures in this folder.
+
+    python tests/reference/make_qp_reference.py [case ...]      # default: all cases
+
+For each case of ``tests/cases.py`` this writes ``tests/reference/<case>.npz`` holding the mesh,
+the skeleton, the boundary conditions ``b, bc`` (from ``cases.boundary_conditions``, an
+independent Python version of libigl's ``boundary_conditions``) and the solution ``W_qp`` of the
+partition-of-unity BBW problem (Solomon & Stein 2025, problem (3), discretised as in Sec. 7)
+
+    min_W 0.5 tr(W^T B W)  s.t.  W 1_m = 1_n,  W >= 0,  W[b] = bc,
+    B = L^T M^{-1} L,  L = igl.cotmatrix(V,T),  M = igl.massmatrix(V,T,VORONOI) / max(M),
+
+computed by a generic QP solver (no skinrs code):
+
+1. clarabel (interior point, faer LDL) on the QP over the free rows only,
+       sum_j 0.5 w_j^T B_ff w_j + w_j^T B_fb bc_j  s.t.  sum_j w_j = 1,  w >= 0;
+2. an exact active-set "polish" (as in OSQP's polishing step): fix the support found by
+   clarabel, solve the equality-constrained KKT system with SuperLU, and accept only if the
+   result satisfies all KKT conditions (W >= 0, multipliers of the active bounds >= 0) to
+   round-off; otherwise grow/shrink the support and repeat (primal-dual active set);
+3. an independent second solver where affordable (OSQP with polishing), compared in max|dW|.
+
+The stored ``W_qp`` is the polished solution when the polish certifies it, else clarabel's.
+KKT residuals of the stored W are recorded (and re-checked by tests/test_reference_fixtures.py).
+For knight the no-PoU oracle of libigl's own unit test is stored as well, with the max error of
+``igl.bbw(V, T, b, bc, max_iter=100)`` on our b, bc against it.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent))
+
+import cases
+
+CASES = ["bar", "disc-holes", "woody", "knight", "hand", "big2d"]
+# Cases where OSQP (second solver) is run; the others rely on the exact KKT certificate.
+OSQP_CASES = {"bar", "disc-holes", "knight"}
+# Skip the clarabel solve (store only mesh + constraints) if a case is expected to exceed this.
+CLARABEL_TIME_LIMIT = 1800.0
+
+
+# --------------------------------------------------------------------------------------------
+# Discretisation (Sec. 7)
+# --------------------------------------------------------------------------------------------
+
+
+def biharmonic_matrix(V, T):
+    """B = L^T M^{-1} L with libigl's cotan L and Voronoi lumped M rescaled by its largest entry.
+
+    Returns B (csc), mass_kind (str) and the rescaling factor max(M) (energy without rescaling
+    = energy / mass_max, as reported in the paper's tables).
+    """
+    import igl
+
+    L = igl.cotmatrix(V, T)
+    M = igl.massmatrix(V, T, igl.MASSMATRIX_TYPE_VORONOI)
+    mass_kind = "voronoi"
+    m = np.asarray(M.diagonal(), dtype=float)
+    if np.any(m <= 0) or abs(M - sp.diags(m)).max() > 0:
+        raise RuntimeError("Voronoi mass matrix not diagonal positive")
+    mass_max = float(m.max())
+    m = m / mass_max
+    B = (L.T @ sp.diags(1.0 / m) @ L).tocsc()
+    B = ((B + B.T) * 0.5).tocsc()
+    B.sum_duplicates()
+    B.sort_indices()
+    return B, mass_kind, mass_max
+
+
+def energy(B, W):
+    """Biharmonic energy 0.5 tr(W^T B W)."""
+    return 0.5 * float(np.sum(W * (B @ W)))
+
+
+def free_rows(n, b):
+    mask = np.ones(n, bool)
+    mask[b] = False
+    return np.flatnonzero(mask)
+
+
+def assemble(W_free, b, bc, n):
+    W = np.zeros((n, bc.shape[1]))
+    W[b] = bc
+    W[free_rows(n, b)] = W_free
+    return W
+
+
+# --------------------------------------------------------------------------------------------
+# KKT residuals (solution-only, no dual variables needed)
+# --------------------------------------------------------------------------------------------
+
+
+def kkt_residuals(B, b, bc, W):
+    """KKT residuals of W for the eliminated QP.
+
+    With G = (B W)[free] the gradient, optimality is: G = v 1^T + Y, Y >= 0, W∘Y = 0, W >= 0,
+    W 1 = 1. Since every free row has some W_ij > 0, the multiplier is v_i = min_j G_ij and
+    Y = G - v 1^T >= 0 automatically; what remains is complementarity max W_ij Y_ij and the
+    stationarity on the support max |Y_ij| over W_ij > 1e-6. Scales: max|G| (gradient size).
+    """
+    n = len(W)
+    f = free_rows(n, b)
+    G = (B @ W)[f]
+    Wf = W[f]
+    v = G.min(axis=1)
+    Y = G - v[:, None]
+    support = Wf > 1e-6
+    return {
+        "min_w": float(W.min()),
+        "pou": float(np.abs(W.sum(axis=1) - 1).max()),
+        "bc": float(np.abs(W[b] - bc).max()),
+        "grad_scale": float(np.abs(G).max()),
+        "complementarity": float(np.max(np.abs(Wf) * Y)),
+        "stationarity_support": float(np.max(Y[support])) if support.any() else 0.0,
+    }
+
+
+# --------------------------------------------------------------------------------------------
+# Solver 1: clarabel
+# --------------------------------------------------------------------------------------------
+
+
+def qp_data(B, b, bc):
+    """Blocks of the eliminated QP: B_ff (csc), linear terms Q = B_fb bc (nf, m), free rows."""
+    n = B.shape[0]
+    f = free_rows(n, b)
+    Bff = B[f][:, f].tocsc()
+    Q = np.asarray(B[f][:, b] @ bc)
+    return Bff, Q, f
+
+
+def solve_clarabel(B, b, bc, tol=1e-11, threads=1):
+    """Solve the eliminated PoU-BBW QP with clarabel. x = vec(W_free) column-major."""
+    import clarabel
+
+    Bff, Q, _f = qp_data(B, b, bc)
+    nf, m = Q.shape
+    P = sp.kron(sp.identity(m, format="csc"), sp.triu(Bff, format="csc"), format="csc")
+    q = Q.reshape(-1, order="F")
+    A_eq = sp.kron(np.ones((1, m)), sp.identity(nf), format="csc")
+    A = sp.vstack([A_eq, -sp.identity(nf * m, format="csc")], format="csc")
+    rhs = np.r_[np.ones(nf), np.zeros(nf * m)]
+    cones = [clarabel.ZeroConeT(nf), clarabel.NonnegativeConeT(nf * m)]
+    s = clarabel.DefaultSettings()
+    s.verbose = False
+    s.direct_solve_method = "faer"
+    s.max_threads = threads
+    s.tol_gap_abs = s.tol_gap_rel = s.tol_feas = tol
+    s.tol_ktratio = 1e-10
+    s.max_iter = 400
+    s.time_limit = CLARABEL_TIME_LIMIT
+    t0 = time.perf_counter()
+    solver = clarabel.DefaultSolver(P, q, A, rhs, cones, s)
+    sol = solver.solve()
+    elapsed = time.perf_counter() - t0
+    x = np.asarray(sol.x)
+    z = np.asarray(sol.z)
+    Wf = x.reshape(nf, m, order="F")
+    # clarabel's KKT: P x + q + A^T z = 0; z[:nf] are the PoU multipliers (-v), the rest
+    # the multipliers Y of w >= 0
+    Y = z[nf:].reshape(nf, m, order="F")
+    info = {
+        "solver": "clarabel " + _version("clarabel"),
+        "status": str(sol.status),
+        "time": elapsed,
+        "iterations": int(sol.iterations),
+        "tol": tol,
+        "threads": threads,
+        "direct_solve_method": "faer",
+        "obj_val": float(sol.obj_val),
+        "n_vars": int(nf * m),
+    }
+    return assemble(Wf, b, bc, B.shape[0]), Y, info
+
+
+# --------------------------------------------------------------------------------------------
+# Exact active-set polish (certificate)
+# --------------------------------------------------------------------------------------------
+
+
+def solve_on_support(Bff, Q, S):
+    """Minimise the QP with w_ij = 0 off the support S (bool nf x m) and PoU, exactly.
+
+    KKT: for (i,j) in S: (B_ff w_j)_i + Q_ij - v_i = 0;  for all i: sum_{j in S_i} w_ij = 1.
+    Returns W_free (nf, m) and v (nf,).
+    """
+    nf, m = Q.shape
+    blocks, rhs, rows_of = [], [], []
+    for j in range(m):
+        idx = np.flatnonzero(S[:, j])
+        rows_of.append(idx)
+        blocks.append(Bff[idx][:, idx])
+        rhs.append(-Q[idx, j])
+    H = sp.block_diag(blocks, format="csc")
+    ns = H.shape[0]
+    cols = np.arange(ns)
+    E = sp.csc_matrix((np.ones(ns), (np.concatenate(rows_of), cols)), shape=(nf, ns))
+    K = sp.bmat([[H, -E.T], [E, None]], format="csc")
+    sol = spla.splu(K, permc_spec="COLAMD").solve(np.r_[np.concatenate(rhs), np.ones(nf)])
+    Wf = np.zeros((nf, m))
+    off = 0
+    for j, idx in enumerate(rows_of):
+        Wf[idx, j] = sol[off : off + len(idx)]
+        off += len(idx)
+    return Wf, sol[ns:]
+
+
+def polish(B, b, bc, W0, Y0, max_rounds=30):
+    """Primal-dual active set started from the interior-point solution; returns (W, v, info).
+
+    The initial support is {W0_ij > Y0_ij / max|Y0|} (W0, Y0: clarabel's primal and bound
+    multipliers; on the central path W_ij Y_ij = mu, so this splits entries by which factor is
+    larger, with Y0 brought to the unit scale of W).
+
+    Converged = W >= -1e-12 and Y = G - v 1^T >= -1e-12*scale off the support, i.e. W satisfies
+    every KKT condition to round-off: it is then the (unique, B_ff is SPD) exact optimum.
+    """
+    Bff, Q, f = qp_data(B, b, bc)
+    S = W0[f] > Y0 / max(float(np.abs(Y0).max()), 1e-300)
+    S[np.arange(len(f)), W0[f].argmax(axis=1)] = True  # every row keeps a support entry
+    t0 = time.perf_counter()
+    history = []
+    for rnd in range(max_rounds):
+        Wf, v = solve_on_support(Bff, Q, S)
+        G = Bff @ Wf + Q
+        Y = G - v[:, None]
+        scale = max(1.0, float(np.abs(G).max()))
+        neg_w = S & (Wf < -1e-12)
+        neg_y = ~S & (Y < -1e-12 * scale)
+        history.append(
+            {"support": int(S.sum()), "neg_w": int(neg_w.sum()), "neg_y": int(neg_y.sum())}
+        )
+        if not neg_w.any() and not neg_y.any():
+            break
+        S = (S & ~neg_w) | neg_y
+    ok = not neg_w.any() and not neg_y.any()
+    Wf[~S] = 0.0
+    info = {
+        "converged": bool(ok),
+        "rounds": rnd + 1,
+        "time": time.perf_counter() - t0,
+        "history": history,
+        "stationarity": float(np.abs(Y[S]).max()),
+        "min_y_off_support": float(Y[~S].min()) if (~S).any() else 0.0,
+        "min_w": float(Wf.min()),
+    }
+    return assemble(Wf, b, bc, B.shape[0]), v, info
+
+
+# --------------------------------------------------------------------------------------------
+# Solver 2: OSQP (polished), where affordable
+# --------------------------------------------------------------------------------------------
+
+
+def solve_osqp(B, b, bc, eps=1e-8, time_limit=900.0):
+    import osqp
+
+    Bff, Q, _f = qp_data(B, b, bc)
+    nf, m = Q.shape
+    P = sp.kron(sp.identity(m, format="csc"), sp.triu(Bff, format="csc"), format="csc")
+    q = Q.reshape(-1, order="F")
+    A = sp.vstack(
+        [
+            sp.kron(np.ones((1, m)), sp.identity(nf), format="csc"),
+            sp.identity(nf * m, format="csc"),
+        ],
+        format="csc",
+    )
+    lo = np.r_[np.ones(nf), np.zeros(nf * m)]
+    hi = np.r_[np.ones(nf), np.full(nf * m, np.inf)]
+    prob = osqp.OSQP()
+    prob.setup(
+        P, q, A, lo, hi, verbose=False, eps_abs=eps, eps_rel=eps, max_iter=200000,
+        polishing=True, polish_refine_iter=10, time_limit=time_limit,
+    )  # fmt: skip
+    t0 = time.perf_counter()
+    res = prob.solve()
+    elapsed = time.perf_counter() - t0
+    Wf = np.asarray(res.x).reshape(nf, m, order="F")
+    info = {
+        "solver": "osqp " + _version("osqp"),
+        "status": str(res.info.status),
+        "polish_status": int(getattr(res.info, "status_polish", 0)),
+        "iterations": int(res.info.iter),
+        "time": elapsed,
+        "eps": eps,
+    }
+    return assemble(Wf, b, bc, B.shape[0]), info
+
+
+# --------------------------------------------------------------------------------------------
+# knight: libigl's no-PoU oracle
+# --------------------------------------------------------------------------------------------
+
+
+def knight_nopou(case, b, bc, data_dir=None):
+    import igl
+
+    d = Path(data_dir) if data_dir else cases.data_root()
+    W_matlab = cases.read_dmat(d / "decimated-knight" / "decimated-knight-matlab-active-set.dmat")
+    t0 = time.perf_counter()
+    W_igl = igl.bbw(case["V"], case["T"], b, bc, partition_unity=False, max_iter=100)
+    t_igl = time.perf_counter() - t0
+    err = float(np.abs(W_igl - W_matlab).max())
+    return W_matlab, {"igl_bbw_max_err": err, "igl_bbw_time": t_igl, "igl_bbw_max_iter": 100}
+
+
+# --------------------------------------------------------------------------------------------
+# Driver
+# --------------------------------------------------------------------------------------------
+
+
+def _version(mod):
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version(mod)
+    except PackageNotFoundError:  # pragma: no cover
+        return "?"
+
+
+def make(name, data_dir=None, skip_qp=False, log=print):
+    case = cases.build(name, data_dir)
+    V, T = case["V"], case["T"]
+    b, bc = cases.boundary_conditions(V, T, case["C"], case["P"], case["BE"])
+    B, mass_kind, mass_max = biharmonic_matrix(V, T)
+    log(f"[{name}] n={len(V)} elements={len(T)} m={bc.shape[1]} |b|={len(b)} mass={mass_kind}")
+    out = {
+        "V": V, "T": T, "C": case["C"], "P": case["P"], "BE": case["BE"], "b": b, "bc": bc,
+        "mass_kind": np.array(mass_kind), "mass_max": mass_max, "bc_eps": cases.BC_EPS,
+    }  # fmt: skip
+    info = {"case": name, "n": len(V), "m": int(bc.shape[1]), "nb": len(b), "mass_kind": mass_kind}
+    versions = {
+        k: _version(k) for k in ("libigl", "clarabel", "osqp", "numpy", "scipy", "triangle")
+    }
+    info["versions"] = versions
+    if name == "knight":
+        W_matlab, nopou = knight_nopou(case, b, bc, data_dir)
+        out["W_nopou_matlab"] = W_matlab
+        info["nopou"] = nopou
+        log(
+            f"[{name}] igl.bbw (no PoU, max_iter 100) vs MATLAB oracle: max err {nopou['igl_bbw_max_err']:.3e}"
+        )
+    if not skip_qp:
+        W_c, Y_c, cinfo = solve_clarabel(B, b, bc)
+        cinfo["energy"] = energy(B, W_c)
+        cinfo["kkt"] = kkt_residuals(B, b, bc, W_c)
+        log(f"[{name}] clarabel {cinfo['status']} in {cinfo['time']:.1f}s, {cinfo['iterations']} it, "
+            f"E={cinfo['energy']:.12g}, kkt={cinfo['kkt']}")  # fmt: skip
+        W_p, _v_p, pinfo = polish(B, b, bc, W_c, Y_c)
+        pinfo["energy"] = energy(B, W_p)
+        pinfo["max_abs_diff_vs_clarabel"] = float(np.abs(W_p - W_c).max())
+        log(f"[{name}] polish converged={pinfo['converged']} rounds={pinfo['rounds']} "
+            f"E={pinfo['energy']:.15g} |dW|={pinfo['max_abs_diff_vs_clarabel']:.2e} {pinfo['history']}")  # fmt: skip
+        W = W_p if pinfo["converged"] else W_c
+        info["clarabel"] = cinfo
+        info["polish"] = pinfo
+        info["stored"] = "polish" if pinfo["converged"] else "clarabel"
+        if name in OSQP_CASES:
+            W_o, oinfo = solve_osqp(B, b, bc)
+            oinfo["energy"] = energy(B, W_o)
+            oinfo["max_abs_diff"] = float(np.abs(W_o - W).max())
+            info["osqp"] = oinfo
+            log(f"[{name}] osqp {oinfo['status']} in {oinfo['time']:.1f}s E={oinfo['energy']:.12g} "
+                f"max|dW|={oinfo['max_abs_diff']:.2e}")  # fmt: skip
+        E = energy(B, W)
+        kkt = kkt_residuals(B, b, bc, W)
+        info.update(energy=E, energy_unscaled=E / mass_max, kkt=kkt)
+        log(
+            f"[{name}] stored {info['stored']}: E={E:.15g} (unscaled {E / mass_max:.10g}) kkt={kkt}"
+        )
+        out.update(W_qp=W, energy=E, energy_unscaled=E / mass_max)
+    out["info_json"] = np.array(json.dumps(info, default=float))
+    path = HERE / f"{name}.npz"
+    np.savez_compressed(path, **out)
+    log(f"[{name}] wrote {path} ({path.stat().st_size / 1e6:.2f} MB)")
+    return info
+
+
+def main(argv=None):
+    argv = list(sys.argv[1:] if argv is None else argv)
+    skip = {a.split("=", 1)[1] for a in argv if a.startswith("--skip-qp=")}
+    names = [a for a in argv if not a.startswith("--")] or CASES
+    for name in names:
+        if name not in cases.BUILDERS:
+            print(f"unknown case {name}; choose from {list(cases.BUILDERS)}", file=sys.stderr)
+            return 2
+    for name in names:
+        make(name, skip_qp=name in skip, log=lambda s: print(s, flush=True))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
