@@ -9,7 +9,7 @@ export SKINRS_DATA := $(DATA)
 
 .PHONY: venv build demo test pytest lint bench clean
 
-$(VENV)/.deps: pyproject.toml
+$(VENV)/.deps: pyproject.toml Makefile
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q "maturin>=1.5,<2" numpy scipy matplotlib tqdm pytest libigl gpytoolbox \
