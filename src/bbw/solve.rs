@@ -69,6 +69,8 @@ impl Default for BbwOptions {
 pub struct BbwInfo {
     pub solver: String,
     pub iterations: usize,
+    /// Objective/gradient evaluations, i.e. multi-column solves with the Cholesky factor.
+    pub evaluations: usize,
     /// `1/2 tr(W^T B W)` of the returned (feasible) weights.
     pub energy: f64,
     /// Best lower bound on the optimal energy found (Lagrangian of the dual).
@@ -124,10 +126,12 @@ pub fn bbw_dual(
 
     let mut best = Best::new();
     let mut iterations = 0;
+    let mut evaluations = 0;
     if nf > 0 {
         let mut u = random_start(nf, m, nvar / (nf * m), opts.seed);
         let last: RefCell<Option<DualPoint>> = RefCell::new(None);
         let fg = |u: &[f64], grad: &mut [f64]| -> f64 {
+            evaluations += 1;
             let y: Vec<f64> = u.iter().map(|v| v * v).collect();
             let dp = eval(&y);
             // d f(U o U) / dU = 2 U o grad_Y f, with grad_Y f = W (eq. 16) or (W, 1 - W).
@@ -195,6 +199,7 @@ pub fn bbw_dual(
     let info = BbwInfo {
         solver: opts.solver.name().to_string(),
         iterations,
+        evaluations,
         energy: best.upper,
         lower_bound: best.lower,
         dual_objective: best.dual_objective,

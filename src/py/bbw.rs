@@ -127,6 +127,7 @@ fn py_bbw_dual<'py>(
     let d = PyDict::new(py);
     d.set_item("solver", info.solver)?;
     d.set_item("iterations", info.iterations)?;
+    d.set_item("evaluations", info.evaluations)?;
     d.set_item("energy", info.energy)?;
     d.set_item("lower_bound", info.lower_bound)?;
     d.set_item("dual_objective", info.dual_objective)?;
