@@ -8,18 +8,36 @@
 
 from . import io
 from .bbw import bbw_dual, bbw_dual_constrained, biharmonic_energy, boundary_conditions
+from .meshing import MeshingWarning, mesh_with_skeleton, skin_weights
 from .operators import biharmonic_matrix, connected_components, cotan_laplacian, massmatrix
+from .skinning import (
+    bone_parents,
+    dqs,
+    forward_kinematics,
+    lbs,
+    per_vertex_normals,
+    quaternions_from_xyzw,
+)
 
 __version__ = "0.1.0"
 
 __all__ = [
+    "MeshingWarning",
     "bbw_dual",
     "bbw_dual_constrained",
     "biharmonic_energy",
     "biharmonic_matrix",
+    "bone_parents",
     "boundary_conditions",
     "connected_components",
     "cotan_laplacian",
+    "dqs",
+    "forward_kinematics",
     "io",
+    "lbs",
     "massmatrix",
+    "mesh_with_skeleton",
+    "per_vertex_normals",
+    "quaternions_from_xyzw",
+    "skin_weights",
 ]

@@ -1,0 +1,273 @@
+"""Meshing with the skeleton inside (TetGen / Triangle through optional packages) and weights on
+the user's own vertices. Samples are re-derived here from the paper's rule (Sec. 7) and found
+geometrically in the volume mesh; weights are checked for the BBW properties."""
+
+import itertools
+import sys
+
+import numpy as np
+import pytest
+import skinrs
+from _skin_data import cylinder, read_mesh, read_obj, read_tgf
+from scipy.spatial import cKDTree
+from skinrs import meshing
+
+
+def mean_edge_length(V, F):
+    E = np.unique(np.sort(np.vstack([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1), axis=0)
+    return np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1).mean()
+
+
+def expected_samples(C, BE, rho):
+    """About two samples per average edge length, at least two per bone, endpoints included."""
+    out = []
+    for i, j in BE:
+        L = np.linalg.norm(C[j] - C[i])
+        k = max(2, int(np.ceil(2 * L / rho)) + 1)
+        out.append(C[i] + np.linspace(0, 1, k)[:, None] * (C[j] - C[i]))
+    return np.vstack(out)
+
+
+def check_weights(W, Wv, b, bc):
+    assert W.min() >= 0.0
+    assert np.abs(W.sum(axis=1) - 1).max() < 1e-12
+    assert Wv.min() >= 0.0
+    assert np.array_equal(Wv[b], bc)  # constrained rows hold exactly
+
+
+def check_bc(Vv, b, bc, C, BE):
+    """Each constrained vertex lies on its bones (1e-12), one-hot off the joints, and a joint is
+    shared equally by the bones meeting there."""
+    for v, row in zip(b, bc, strict=True):
+        bones = np.flatnonzero(row)
+        np.testing.assert_allclose(row[bones], 1.0 / len(bones), rtol=0, atol=1e-15)
+        for e in bones:
+            a, c = C[BE[e, 0]], C[BE[e, 1]]
+            t = np.clip((Vv[v] - a) @ (c - a) / ((c - a) @ (c - a)), 0, 1)
+            assert np.linalg.norm(a + t * (c - a) - Vv[v]) < 1e-12
+        if len(bones) > 1:  # only joints are shared
+            joint = [j for j in np.unique(BE) if np.array_equal(Vv[v], C[j])]
+            assert len(joint) == 1
+            assert len(bones) == np.sum(BE == joint[0])
+
+
+@pytest.fixture(scope="module")
+def arm(data_dir):
+    V, F = read_obj(data_dir / "arm" / "arm.obj")
+    C, BE = read_tgf(data_dir / "arm" / "arm.tgf")
+    W, vol = skinrs.skin_weights(V, F, C, BE, tol=1e-3, return_mesh=True)
+    return V, F, C, BE, W, vol
+
+
+def test_arm_volume_mesh_has_every_bone_sample_as_a_vertex(arm):
+    V, F, C, BE, _, vol = arm
+    Vv, T, b = vol["V"], vol["T"], vol["b"]
+    assert np.array_equal(Vv[: len(V)], V)  # surface vertices unchanged, first rows
+    S = expected_samples(C, BE, mean_edge_length(V, F))
+    d, idx = cKDTree(Vv).query(S)
+    assert d.max() <= 1e-12, d.max()
+    # the constrained vertices are exactly the samples (joints counted once)
+    assert np.array_equal(np.unique(idx), np.sort(b))
+    X = Vv[T]
+    vols = np.einsum("ij,ij->i", X[:, 1] - X[:, 0], np.cross(X[:, 2] - X[:, 0], X[:, 3] - X[:, 0]))
+    assert np.abs(vols).min() > 0
+    check_bc(Vv, b, vol["bc"], C, BE)
+    # the lead's geometric detection of vertices on bones finds the same constraints
+    b2, bc2 = skinrs.boundary_conditions(Vv, C, BE=BE, tol=1e-9)
+    assert np.array_equal(b2, np.sort(b))
+    np.testing.assert_allclose(bc2, vol["bc"][np.argsort(b)], atol=1e-15)
+
+
+def test_arm_skin_weights(arm):
+    V, _, C, BE, W, vol = arm
+    assert W.shape == (len(V), len(BE))
+    check_weights(W, vol["W"], vol["b"], vol["bc"])
+    np.testing.assert_array_equal(W, vol["W"][: len(V)])
+    # each bone dominates the surface around its middle
+    for e, (i, j) in enumerate(BE):
+        mid = (C[i] + C[j]) / 2
+        near = np.argsort(np.linalg.norm(V - mid, axis=1))[:20]
+        assert np.all(W[near].argmax(axis=1) == e)
+
+
+def test_hand_skin_weights(data_dir):
+    V, F, _ = read_mesh(data_dir / "hand-403" / "hand.mesh")
+    C, BE = read_tgf(data_dir / "hand-403" / "hand.tgf")
+    W, vol = skinrs.skin_weights(V, F, C, BE, tol=1e-3, return_mesh=True)
+    assert W.shape == (len(V), 20)
+    assert np.array_equal(vol["V"][: len(V)], V)
+    check_weights(W, vol["W"], vol["b"], vol["bc"])
+    check_bc(vol["V"], vol["b"], vol["bc"], C, BE)
+    # joint 2 (index 1) is the wrist hub where 6 bones meet: 1/6 each
+    hub = vol["b"][np.flatnonzero([np.array_equal(vol["V"][v], C[1]) for v in vol["b"]])]
+    assert len(hub) == 1
+    row = vol["W"][hub[0]]
+    assert np.array_equal(np.flatnonzero(row), np.flatnonzero((BE == 1).any(axis=1)))
+    np.testing.assert_allclose(row[row > 0], 1 / 6, rtol=0, atol=1e-15)
+    S = expected_samples(C, BE, mean_edge_length(V, F))
+    assert cKDTree(vol["V"]).query(S)[0].max() <= 1e-12
+
+
+def test_2d_outline_bones_are_vertices_and_segments():
+    # an L-shaped outline with a two-bone skeleton around the corner
+    V = np.array([[0.0, 0], [4, 0], [4, 4], [3, 4], [3, 1], [0, 1]])
+    C = np.array([[0.5, 0.5], [3.5, 0.5], [3.5, 3.5]])
+    BE = np.array([[0, 1], [1, 2]])
+    W, vol = skinrs.skin_weights(V, None, C, BE, tol=1e-6, return_mesh=True)
+    Vv, T, b = vol["V"], vol["T"], vol["b"]
+    assert np.array_equal(Vv[:6], V)
+    check_weights(W, vol["W"], b, vol["bc"])
+    check_bc(Vv, b, vol["bc"], C, BE)
+    # the bones are edges of the triangulation between consecutive samples
+    edges = {tuple(sorted(e)) for t in T for e in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0]))}
+    for e in range(2):
+        on = b[vol["bc"][:, e] > 0]
+        on = on[np.argsort(np.linalg.norm(Vv[on] - C[BE[e, 0]], axis=1))]
+        assert all(tuple(sorted(p)) in edges for p in itertools.pairwise(on))
+    # no triangle outside the L (the notch x > 3, y > 1 is not part of it... it is; the
+    # missing part is 0 <= x < 3, 1 < y <= 4)
+    cent = Vv[T].mean(axis=1)
+    assert not np.any((cent[:, 0] < 3) & (cent[:, 1] > 1))
+    area = 0.5 * np.abs(np.cross(Vv[T[:, 1]] - Vv[T[:, 0]], Vv[T[:, 2]] - Vv[T[:, 0]])).sum()
+    assert abs(area - 7.0) < 1e-12
+
+
+def test_2d_triangle_mesh_keeps_its_vertices(data_dir):
+    V, F = read_obj(data_dir / "woody-2d" / "woody.obj")  # z = 0 column
+    C, BE = read_tgf(data_dir / "woody-2d" / "woody.tgf")
+    Vv, T, b, bc = skinrs.mesh_with_skeleton(V, F, C, BE)
+    assert Vv.shape[1] == 3 and np.array_equal(Vv[: len(V)], V)
+    S = expected_samples(C[:, :2], BE, mean_edge_length(V[:, :2], F))
+    assert cKDTree(Vv[:, :2]).query(S)[0].max() <= 1e-12
+    check_bc(Vv[:, :2], b, bc, C[:, :2], BE)
+    assert T.shape[1] == 3 and len(np.unique(T)) == len(Vv)
+
+
+# ---------------------------------------------------------------------------------------------
+# Skeletons partly or wholly outside, missing packages, fallback mesher
+
+
+@pytest.fixture
+def tube():
+    V, F = cylinder(24, 30, length=4.0, radius=0.5)
+    C = np.array([[0.2, 0, 0], [2.0, 0, 0], [3.8, 0, 0]])
+    return V, F, C, np.array([[0, 1], [1, 2]])
+
+
+def test_bone_partly_outside_warns_and_keeps_inside_samples(tube):
+    V, F, C, BE = tube
+    C = C.copy()
+    C[2] = [6.0, 0, 0]  # the second bone ends 2 units past the cap: half of it outside
+    with pytest.warns(meshing.MeshingWarning, match=r"bone 1 is partly outside.*\(5\d%"):
+        Vv, _T, b, bc = skinrs.mesh_with_skeleton(V, F, C, BE)
+    assert np.all(Vv[b, 0] <= 4.0)
+    assert np.array_equal(Vv[: len(V)], V)
+    assert bc[:, 1].sum() > 1
+
+
+def test_bone_wholly_outside_is_an_error(tube):
+    V, F, C, BE = tube
+    C = np.vstack([C, [[0.0, 3, 0], [1.0, 3, 0]]])
+    BE = np.vstack([BE, [[3, 4]]])
+    with pytest.raises(ValueError, match="bone 2 lies wholly outside"):
+        skinrs.mesh_with_skeleton(V, F, C, BE)
+
+
+def test_missing_meshing_package_says_what_to_install(tube, monkeypatch):
+    V, F, C, BE = tube
+    monkeypatch.setitem(sys.modules, "tetgen", None)
+    with pytest.raises(ImportError, match=r"pip install skinrs\[mesh\]"):
+        skinrs.mesh_with_skeleton(V, F, C, BE)
+    monkeypatch.setitem(sys.modules, "triangle", None)
+    with pytest.raises(ImportError, match=r"pip install skinrs\[mesh\]"):
+        square = np.array([[0.0, 0], [1, 0], [1, 1], [0, 1]])
+        skinrs.mesh_with_skeleton(square, None, np.array([[0.2, 0.5], [0.8, 0.5]]), [[0, 1]])
+
+
+def test_tetgen_failure_without_fallback_is_a_clear_error(tube, monkeypatch):
+    V, F, C, BE = tube
+
+    def broken(*args, **kw):
+        raise RuntimeError("Failed to tetrahedralize")
+
+    monkeypatch.setattr(meshing, "_tetgen", broken)
+    monkeypatch.setitem(sys.modules, "pytetwild", None)
+    with pytest.raises(ImportError, match=r"TetGen failed.*pytetwild.*pip install skinrs\[mesh\]"):
+        skinrs.mesh_with_skeleton(V, F, C, BE)
+
+
+def test_fallback_mesher_snaps_vertices_onto_samples(tube, monkeypatch):
+    """When TetGen fails, a fallback mesh without the samples gets its nearest vertices moved
+    onto them, with a warning giving the distance."""
+    V, F, C, BE = tube
+    real = meshing._tetgen
+
+    def broken(*args, **kw):
+        raise RuntimeError("Failed to tetrahedralize")
+
+    def fallback(V, F, S, verbose):  # stands in for fTetWild: a quality mesh of the surface only
+        return real(V, F, np.zeros((0, 3)), "pq1.2Y", verbose)
+
+    monkeypatch.setattr(meshing, "_tetgen", broken)
+    monkeypatch.setattr(meshing, "_tetwild", fallback)
+    with pytest.warns(meshing.MeshingWarning, match=r"fTetWild.*largest move"):
+        Vv, _T, b, bc = skinrs.mesh_with_skeleton(V, F, C, BE)
+    S = expected_samples(C, BE, mean_edge_length(V, F))
+    assert cKDTree(Vv[b]).query(S)[0].max() == 0.0
+    assert len(b) == len(np.unique(b)) == len(S) - 1  # the shared joint once
+    check_bc(Vv, b, bc, C, BE)
+
+
+def test_bad_arguments(tube):
+    V, F, C, BE = tube
+    with pytest.raises(ValueError, match="no handles"):
+        skinrs.mesh_with_skeleton(V, F, C)
+    with pytest.raises(ValueError, match="triangles F"):
+        skinrs.mesh_with_skeleton(V, None, C, BE)
+    with pytest.raises(ValueError, match="BE"):
+        skinrs.mesh_with_skeleton(V, F, C, [[0, 5]])
+    with pytest.raises(ValueError, match="zero length"):
+        skinrs.mesh_with_skeleton(V, F, C, [[0, 0]])
+    with pytest.raises(ValueError, match="point handle 0 lies outside"):
+        skinrs.mesh_with_skeleton(V, F, np.vstack([C, [[0, 5.0, 0]]]), BE, P=[3])
+
+
+def test_fallback_remeshes_the_repaired_surface_and_interpolates_weights(tube, monkeypatch):
+    """TetGen fails on the input; the fallback's clean boundary is meshed again with the samples
+    inserted exactly, and skin_weights interpolates the weights back to the input vertices."""
+    V, F, C, BE = tube
+    real, calls = meshing._tetgen, []
+
+    def first_fails(*args, **kw):
+        calls.append(1)
+        if len(calls) == 1:
+            raise RuntimeError("Failed to tetrahedralize")
+        return real(*args, **kw)
+
+    def fallback(V, F, S, verbose):  # stands in for fTetWild (its own surface, no samples)
+        return real(V, F, np.zeros((0, 3)), "pq1.5YQ", verbose)
+
+    monkeypatch.setattr(meshing, "_tetgen", first_fails)
+    monkeypatch.setattr(meshing, "_tetwild", fallback)
+    with pytest.warns(meshing.MeshingWarning, match="repaired surface"):
+        W, vol = skinrs.skin_weights(V, F, C, BE, tol=1e-3, return_mesh=True)
+    S = expected_samples(C, BE, mean_edge_length(V, F))
+    assert cKDTree(vol["V"][vol["b"]]).query(S)[0].max() == 0.0
+    check_bc(vol["V"], vol["b"], vol["bc"], C, BE)
+    assert W.shape == (len(V), 2) and W.min() >= 0
+    assert np.abs(W.sum(axis=1) - 1).max() < 1e-12
+    assert np.all(W[V[:, 0] < 0.5].argmax(axis=1) == 0)
+    assert np.all(W[V[:, 0] > 3.5].argmax(axis=1) == 1)
+
+
+def test_point_handles_come_first(tube):
+    V, F, C, BE = tube
+    C = np.vstack([C, [[3.0, 0.2, 0.1]]])
+    W, vol = skinrs.skin_weights(V, F, C, BE, P=[3], tol=1e-3, return_mesh=True)
+    b, bc, Vv = vol["b"], vol["bc"], vol["V"]
+    assert W.shape == (len(V), 3) and bc.shape[1] == 3
+    handle = b[bc[:, 0] == 1.0]
+    assert len(handle) == 1 and np.array_equal(Vv[handle[0]], C[3])
+    assert np.all(bc[bc[:, 0] > 0, 1:] == 0)
+    check_bc(Vv, b[bc[:, 0] == 0], bc[bc[:, 0] == 0][:, 1:], C, BE)
+    check_weights(W, vol["W"], b, bc)
