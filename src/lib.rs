@@ -9,6 +9,7 @@ pub mod constraints;
 pub mod error;
 pub mod operators;
 pub mod progress;
+pub mod reduce;
 pub mod skin;
 pub mod sparse;
 

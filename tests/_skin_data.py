@@ -32,7 +32,7 @@ def read_dmat(path: Path) -> np.ndarray:
     """ASCII .dmat: first line ``cols rows``, then column-major numbers."""
     tok = Path(path).read_text().split()
     cols, rows = int(tok[0]), int(tok[1])
-    return np.array(tok[2:2 + cols * rows], dtype=np.float64).reshape(cols, rows).T
+    return np.array(tok[2 : 2 + cols * rows], dtype=np.float64).reshape(cols, rows).T
 
 
 def read_obj(path: Path):
@@ -57,13 +57,16 @@ def read_mesh(path: Path):
         if key in ("Vertices", "Triangles", "Tetrahedra"):
             n = int(tok[i + 1])
             width = {"Vertices": 4, "Triangles": 4, "Tetrahedra": 5}[key]
-            a = np.array(tok[i + 2:i + 2 + n * width], dtype=np.float64).reshape(n, width)
+            a = np.array(tok[i + 2 : i + 2 + n * width], dtype=np.float64).reshape(n, width)
             out[key] = a[:, :-1]
             i += 2 + n * width
         else:
             i += 1
-    return (out["Vertices"], out["Triangles"].astype(np.int64) - 1,
-            out["Tetrahedra"].astype(np.int64) - 1)
+    return (
+        out["Vertices"],
+        out["Triangles"].astype(np.int64) - 1,
+        out["Tetrahedra"].astype(np.int64) - 1,
+    )
 
 
 def cylinder(n_around=48, n_along=60, length=4.0, radius=0.5):

@@ -59,8 +59,9 @@ def test_lbs_non_contiguous_and_float32_inputs_are_accepted():
     V = rng.standard_normal((200, 6))[:, ::2]  # strided view
     W = np.asfortranarray(rng.random((200, 4)))
     T = random_affine(4, 3, rng)
-    U_ref = gpt.linear_blend_skinning(np.ascontiguousarray(V), np.ascontiguousarray(W),
-                                      T[:, :, :3], T[:, :, 3])
+    U_ref = gpt.linear_blend_skinning(
+        np.ascontiguousarray(V), np.ascontiguousarray(W), T[:, :, :3], T[:, :, 3]
+    )
     np.testing.assert_allclose(skinrs.lbs(V, W, T), U_ref, rtol=0, atol=1e-12)
     U32 = skinrs.lbs(V.astype(np.float32), W.astype(np.float32), T)
     np.testing.assert_allclose(U32, U_ref, rtol=0, atol=1e-5 * np.abs(U_ref).max())
@@ -72,8 +73,9 @@ def test_lbs_out_is_written_and_returned():
     out = np.full((100, 3), np.nan)
     U = skinrs.lbs(V, W, T, out=out)
     assert U is out
-    np.testing.assert_allclose(out, gpt.linear_blend_skinning(V, W, T[:, :, :3], T[:, :, 3]),
-                               rtol=0, atol=1e-12)
+    np.testing.assert_allclose(
+        out, gpt.linear_blend_skinning(V, W, T[:, :, :3], T[:, :, 3]), rtol=0, atol=1e-12
+    )
     with pytest.raises(ValueError, match="out"):
         skinrs.lbs(V, W, T, out=np.empty((99, 3)))
     with pytest.raises(ValueError, match="out"):
@@ -143,7 +145,9 @@ def test_dqs_equals_lbs_where_influences_coincide():
     W[:half, 1] = 1 - W[:half, 0]
     W[half:, 2] = rng.random(n - half)
     W[half:, 3] = 1 - W[half:, 2]
-    rigid = np.vstack([V[:half] @ T[0, :, :3].T + T[0, :, 3], V[half:] @ T[2, :, :3].T + T[2, :, 3]])
+    rigid = np.vstack(
+        [V[:half] @ T[0, :, :3].T + T[0, :, 3], V[half:] @ T[2, :, :3].T + T[2, :, 3]]
+    )
     U_lbs, U_dqs = skinrs.lbs(V, W, T), skinrs.dqs(V, W, T)
     assert np.abs(U_lbs - rigid).max() < 1e-12
     assert np.abs(U_dqs - rigid).max() < 1e-12
@@ -226,8 +230,9 @@ def test_fk_three_bone_chain_known_answer():
     -> about j0 -> (-1, 1, 1)."""
     C = np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0], [3, 0, 0]])
     BE = np.array([[0, 1], [1, 2], [2, 3]])
-    Q = np.array([quat([0, 0, 1], np.pi / 2), quat([0, 0, 1], np.pi / 2),
-                  quat([1, 0, 0], np.pi / 2)])
+    Q = np.array(
+        [quat([0, 0, 1], np.pi / 2), quat([0, 0, 1], np.pi / 2), quat([1, 0, 0], np.pi / 2)]
+    )
     T = skinrs.forward_kinematics(C, BE, Q)
     apply = lambda b, x: T[b, :, :3] @ np.asarray(x, float) + T[b, :, 3]
     np.testing.assert_allclose(apply(0, C[1]), [0, 1, 0], atol=1e-15)
@@ -247,8 +252,9 @@ def test_fk_hand_pose_keeps_joints_attached(data_dir):
     C, BE = read_tgf(data_dir / "hand-403" / "hand.tgf")
     Q = skinrs.quaternions_from_xyzw(read_dmat(data_dir / "hand-403" / "hand-pose.dmat"))
     assert Q.shape == (20, 4)
-    np.testing.assert_allclose(Q[0], [0.75297704283434619, 0.61618142029453848,
-                                      0.21865691494778211, -0.074398815808914262])
+    np.testing.assert_allclose(
+        Q[0], [0.75297704283434619, 0.61618142029453848, 0.21865691494778211, -0.074398815808914262]
+    )
     T = skinrs.forward_kinematics(C, BE, Q)
     P = skinrs.bone_parents(BE)
     assert (P == -1).sum() == 1

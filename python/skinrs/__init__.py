@@ -10,6 +10,13 @@ from . import io
 from .bbw import bbw_dual, bbw_dual_constrained, biharmonic_energy, boundary_conditions
 from .meshing import MeshingWarning, mesh_with_skeleton, skin_weights
 from .operators import biharmonic_matrix, connected_components, cotan_laplacian, massmatrix
+from .reduce import (
+    random_skeleton_poses,
+    reduce_weights,
+    reduction_error,
+    transform_normals,
+    unpack_weights,
+)
 from .skinning import (
     bone_parents,
     dqs,
@@ -39,5 +46,10 @@ __all__ = [
     "mesh_with_skeleton",
     "per_vertex_normals",
     "quaternions_from_xyzw",
+    "random_skeleton_poses",
+    "reduce_weights",
+    "reduction_error",
     "skin_weights",
+    "transform_normals",
+    "unpack_weights",
 ]

@@ -21,7 +21,13 @@ import numpy as np
 
 from ._checks import as_index_array, as_points
 
-__all__ = ["MeshingWarning", "mesh_with_skeleton", "sample_skeleton", "skin_weights", "winding_number"]
+__all__ = [
+    "MeshingWarning",
+    "mesh_with_skeleton",
+    "sample_skeleton",
+    "skin_weights",
+    "winding_number",
+]
 
 _INSTALL = "install the optional meshing packages with `pip install skinrs[mesh]`"
 
@@ -44,18 +50,17 @@ def winding_number(V, F, Q, chunk: int = 256) -> np.ndarray:
     V, Q = np.asarray(V, float), np.asarray(Q, float)
     out = np.empty(len(Q))
     for s in range(0, len(Q), chunk):
-        q = Q[s:s + chunk, None, :]
+        q = Q[s : s + chunk, None, :]
         if F.shape[1] == 2:
             a, b = V[F[:, 0]][None] - q, V[F[:, 1]][None] - q
             cr = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
-            out[s:s + chunk] = np.arctan2(cr, (a * b).sum(-1)).sum(1) / (2 * np.pi)
+            out[s : s + chunk] = np.arctan2(cr, (a * b).sum(-1)).sum(1) / (2 * np.pi)
         else:
             a, b, c = (V[F[:, i]][None] - q for i in range(3))
             la, lb, lc = (np.linalg.norm(x, axis=-1) for x in (a, b, c))
             det = np.einsum("qki,qki->qk", a, np.cross(b, c))
-            den = (la * lb * lc + (a * b).sum(-1) * lc + (b * c).sum(-1) * la
-                   + (c * a).sum(-1) * lb)
-            out[s:s + chunk] = 2 * np.arctan2(det, den).sum(1) / (4 * np.pi)
+            den = la * lb * lc + (a * b).sum(-1) * lc + (b * c).sum(-1) * la + (c * a).sum(-1) * lb
+            out[s : s + chunk] = 2 * np.arctan2(det, den).sum(1) / (4 * np.pi)
     return out
 
 
@@ -64,8 +69,11 @@ def winding_number(V, F, Q, chunk: int = 256) -> np.ndarray:
 
 
 def _mean_edge_length(V, F) -> float:
-    E = np.vstack([F[:, [i, (i + 1) % F.shape[1]]] for i in range(F.shape[1])]) \
-        if F.shape[1] > 2 else F
+    E = (
+        np.vstack([F[:, [i, (i + 1) % F.shape[1]]] for i in range(F.shape[1])])
+        if F.shape[1] > 2
+        else F
+    )
     E = np.unique(np.sort(E, axis=1), axis=0)
     return float(np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1).mean())
 
@@ -122,11 +130,17 @@ def _keep_inside(S, handles, inside, n_points: int, n_bones: int):
         rows = np.array([r for r, hs in enumerate(handles) if c in hs])
         frac_out = 1.0 - inside[rows].mean()
         if frac_out == 1.0:
-            raise ValueError(f"bone {e} lies wholly outside the surface: none of its "
-                             f"{len(rows)} samples is inside; fix the skeleton or the mesh")
+            raise ValueError(
+                f"bone {e} lies wholly outside the surface: none of its "
+                f"{len(rows)} samples is inside; fix the skeleton or the mesh"
+            )
         if frac_out > 0:
-            warnings.warn(f"bone {e} is partly outside the surface ({100 * frac_out:.0f}% of its "
-                          f"samples); its inside samples are kept", MeshingWarning, stacklevel=3)
+            warnings.warn(
+                f"bone {e} is partly outside the surface ({100 * frac_out:.0f}% of its "
+                f"samples); its inside samples are kept",
+                MeshingWarning,
+                stacklevel=3,
+            )
     keep = np.flatnonzero(inside)
     return S[keep], [handles[r] for r in keep]
 
@@ -176,8 +190,9 @@ def _tetwild(V, F, S, verbose: bool):
     input vertices or insert points, so the caller snaps vertices onto the samples."""
     import pytetwild  # ImportError when missing (also raised when its pyvista dependency is)
 
-    VV, TT = pytetwild.tetrahedralize(np.asarray(V, float), np.asarray(F, np.int32),
-                                      quiet=not verbose)
+    VV, TT = pytetwild.tetrahedralize(
+        np.asarray(V, float), np.asarray(F, np.int32), quiet=not verbose
+    )
     return np.asarray(VV, float), np.asarray(TT, np.int64)
 
 
@@ -209,8 +224,18 @@ def _as_2d(V, F):
     return V2, E[cnt[inv.reshape(-1)] == 1]
 
 
-def mesh_with_skeleton(V, F, C, BE=None, P=None, *, samples_per_edge: float = 2.0,
-                       min_samples: int = 2, flags: str | None = None, verbose: bool = False):
+def mesh_with_skeleton(
+    V,
+    F,
+    C,
+    BE=None,
+    P=None,
+    *,
+    samples_per_edge: float = 2.0,
+    min_samples: int = 2,
+    flags: str | None = None,
+    verbose: bool = False,
+):
     """Volume mesh of a closed surface (3D) or a 2D domain whose vertices include the handles.
 
     Bones are sampled about ``samples_per_edge`` times per average edge length of the input
@@ -306,8 +331,7 @@ def mesh_with_skeleton(V, F, C, BE=None, P=None, *, samples_per_edge: float = 2.
         Vd, E = V, None
         rho = _mean_edge_length(V, F)
         boundary = F
-    S, handles = sample_skeleton(C, BE, P, spacing=rho / samples_per_edge,
-                                 min_samples=min_samples)
+    S, handles = sample_skeleton(C, BE, P, spacing=rho / samples_per_edge, min_samples=min_samples)
     w = winding_number(Vd, boundary, S)
     inside = np.abs(w) > 0.5
     S, handles = _keep_inside(S, handles, inside, nP, nB)
@@ -349,8 +373,10 @@ def mesh_with_skeleton(V, F, C, BE=None, P=None, *, samples_per_edge: float = 2.
                 Vw, Tw = _tetwild(V, F, Si, verbose)
             except ImportError as e:
                 why = f"TetGen failed ({err})" if err else "TetGen did not keep the input vertices"
-                raise ImportError(f"{why}; the fallback mesher pytetwild is not available ({e}): "
-                                  f"{_INSTALL} (or repair the surface)") from None
+                raise ImportError(
+                    f"{why}; the fallback mesher pytetwild is not available ({e}): "
+                    f"{_INSTALL} (or repair the surface)"
+                ) from None
             return _fallback(Vw, Tw, S, handles, nP + nB, scale, flags or "pq2Y", verbose)
 
     b = np.where(on_vertex, nearest, 0)
@@ -364,8 +390,7 @@ def mesh_with_skeleton(V, F, C, BE=None, P=None, *, samples_per_edge: float = 2.
 
 def _rows_match(Vv, V, S) -> bool:
     n, s = len(V), len(S)
-    return (len(Vv) >= n + s and np.array_equal(Vv[:n], V)
-            and np.array_equal(Vv[n:n + s], S))
+    return len(Vv) >= n + s and np.array_equal(Vv[:n], V) and np.array_equal(Vv[n : n + s], S)
 
 
 def _bone_segments(S, handles, insert, nP, nB):
@@ -387,8 +412,7 @@ def _bone_segments(S, handles, insert, nP, nB):
 
 def _boundary_faces(T):
     faces = np.vstack([T[:, [1, 2, 3]], T[:, [0, 3, 2]], T[:, [0, 1, 3]], T[:, [0, 2, 1]]])
-    _, inv, cnt = np.unique(np.sort(faces, axis=1), axis=0, return_inverse=True,
-                            return_counts=True)
+    _, inv, cnt = np.unique(np.sort(faces, axis=1), axis=0, return_inverse=True, return_counts=True)
     return faces[cnt[inv.reshape(-1)] == 1]
 
 
@@ -405,17 +429,25 @@ def _fallback(Vw, Tw, S, handles, m, scale, flags, verbose):
     except Exception:  # noqa: BLE001 - any TetGen failure sends us to snapping
         exact = False
     if exact:
-        warnings.warn("TetGen could not mesh the input surface; meshed fTetWild's repaired "
-                      "surface instead (samples inserted exactly). The input surface vertices are "
-                      "not rows of V_vol.", MeshingWarning, stacklevel=3)
+        warnings.warn(
+            "TetGen could not mesh the input surface; meshed fTetWild's repaired "
+            "surface instead (samples inserted exactly). The input surface vertices are "
+            "not rows of V_vol.",
+            MeshingWarning,
+            stacklevel=3,
+        )
         return Vv, T, len(Vs) + np.arange(len(S), dtype=np.int64), bc
     idx, d = _assign_nearest(Vw, S)
     Vv = Vw.copy()
     Vv[idx] = S
-    warnings.warn(f"TetGen could not mesh the surface; used fTetWild and moved {len(idx)} volume "
-                  f"vertices onto the handle samples (largest move {d.max():.3g}, "
-                  f"{d.max() / scale:.2%} of the bounding-box diagonal). The input surface "
-                  f"vertices are not rows of V_vol.", MeshingWarning, stacklevel=3)
+    warnings.warn(
+        f"TetGen could not mesh the surface; used fTetWild and moved {len(idx)} volume "
+        f"vertices onto the handle samples (largest move {d.max():.3g}, "
+        f"{d.max() / scale:.2%} of the bounding-box diagonal). The input surface "
+        f"vertices are not rows of V_vol.",
+        MeshingWarning,
+        stacklevel=3,
+    )
     order = np.argsort(idx)
     return Vv, Tw, idx[order].astype(np.int64), bc[order]
 
@@ -431,8 +463,10 @@ def _assign_nearest(Vv, S, k: int = 16):
     for s in np.argsort(d[:, 0]):
         free = [c for c in range(k) if nn[s, c] not in taken]
         if not free:
-            raise ValueError("the fallback mesh is too coarse for the skeleton: samples crowd "
-                             "onto the same vertices; lower samples_per_edge or refine")
+            raise ValueError(
+                "the fallback mesh is too coarse for the skeleton: samples crowd "
+                "onto the same vertices; lower samples_per_edge or refine"
+            )
         idx[s], dist[s] = nn[s, free[0]], d[s, free[0]]
         taken.add(int(idx[s]))
     return idx, dist
@@ -441,8 +475,7 @@ def _assign_nearest(Vv, S, k: int = 16):
 # ---------------------------------------------------------------------------------------------
 
 
-def skin_weights(V, F, C, BE=None, P=None, *, mesh_options=None, return_mesh=False,
-                 **bbw_options):
+def skin_weights(V, F, C, BE=None, P=None, *, mesh_options=None, return_mesh=False, **bbw_options):
     """Bounded biharmonic weights on the vertices of a surface (3D) or 2D domain.
 
     Meshes the interior with the handles as vertices (:func:`mesh_with_skeleton`), solves

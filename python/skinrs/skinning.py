@@ -59,7 +59,9 @@ def _split_weights(W):
     """``(weights, index or None)`` from dense ``W``, a packed pair, or a scipy.sparse matrix."""
     if isinstance(W, tuple):  # (indices, weights); a list is read as a dense matrix
         if len(W) != 2:
-            raise ValueError(f"packed weights must be a pair (indices, weights), got {len(W)} items")
+            raise ValueError(
+                f"packed weights must be a pair (indices, weights), got {len(W)} items"
+            )
         I, Wk = W
         I = _as_index_view(I, "W indices")
         Wk = _as_float_view(Wk, "W weights", 2)

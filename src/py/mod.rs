@@ -14,6 +14,7 @@ use crate::sparse::Csc;
 
 mod bbw;
 mod operators;
+mod reduce;
 mod skin;
 
 /// Maps the crate's error to the Python exception the user should see.
@@ -116,5 +117,6 @@ fn _skinrs(m: &Bound<'_, PyModule>) -> PyResult<()> {
     operators::register(m)?;
     bbw::register(m)?;
     skin::register(m)?;
+    reduce::register(m)?;
     Ok(())
 }

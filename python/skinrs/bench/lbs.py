@@ -56,7 +56,9 @@ def numpy_matmul_lbs(V, W, T):
 def main(argv=None) -> int:
     import skinrs
 
-    ap = argparse.ArgumentParser(prog="python -m skinrs.bench lbs", description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(
+        prog="python -m skinrs.bench lbs", description=__doc__.split("\n")[0]
+    )
     ap.add_argument("--n", type=int, default=1_000_000, help="vertices (default 1e6)")
     ap.add_argument("--m", type=int, default=16, help="handles (dense weight columns)")
     ap.add_argument("--k", type=int, default=4, help="influences per vertex (packed)")
@@ -117,21 +119,31 @@ def main(argv=None) -> int:
     row(f"skinrs.dqs, dense m={m}", t_dqs_dense, m, bytes_dense, t_np_dense)
     row(f"skinrs.dqs, packed k={k}", t_dqs_packed, k, bytes_packed, t_np_packed)
 
-    print(f"LBS benchmark: n = {n:,} vertices, m = {m} handles, k = {k} packed influences, "
-          f"best of {r}")
+    print(
+        f"LBS benchmark: n = {n:,} vertices, m = {m} handles, k = {k} packed influences, "
+        f"best of {r}"
+    )
     print(f"memory copy (numpy, {a.copy_mb} MB, read+write): {bw_copy / 1e9:.2f} GB/s")
-    print(f"{'method':<30} {'time ms':>9} {'Ginfl/s':>9} {'GB/s':>7} {'% copy bw':>10} "
-          f"{'x numpy einsum':>15}")
+    print(
+        f"{'method':<30} {'time ms':>9} {'Ginfl/s':>9} {'GB/s':>7} {'% copy bw':>10} "
+        f"{'x numpy einsum':>15}"
+    )
     for name, t, ips, bps, ratio in rows:
         rs = f"{ratio:.1f}" if ratio else "-"
-        print(f"{name:<30} {t * 1e3:9.2f} {ips / 1e9:9.3f} {bps / 1e9:7.2f} "
-              f"{100 * bps / bw_copy:9.0f}% {rs:>15}")
+        print(
+            f"{name:<30} {t * 1e3:9.2f} {ips / 1e9:9.3f} {bps / 1e9:7.2f} "
+            f"{100 * bps / bw_copy:9.0f}% {rs:>15}"
+        )
     ok_dense = t_np_dense / t_dense >= 5 and bytes_dense / t_dense_out >= 0.5 * bw_copy
     ok_packed = t_np_packed / t_packed >= 5 and bytes_packed / t_packed_out >= 0.5 * bw_copy
-    print("(the copy probe writes into a preallocated array, so bandwidth is compared with the "
-          "out= rows;\n fresh outputs also pay the page faults of a new allocation)")
-    print(f"target (>= 5x numpy einsum and >= 50% of copy bandwidth): "
-          f"dense {'met' if ok_dense else 'NOT met'}, packed {'met' if ok_packed else 'NOT met'}")
+    print(
+        "(the copy probe writes into a preallocated array, so bandwidth is compared with the "
+        "out= rows;\n fresh outputs also pay the page faults of a new allocation)"
+    )
+    print(
+        f"target (>= 5x numpy einsum and >= 50% of copy bandwidth): "
+        f"dense {'met' if ok_dense else 'NOT met'}, packed {'met' if ok_packed else 'NOT met'}"
+    )
     return 0
 
 

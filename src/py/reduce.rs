@@ -1,0 +1,290 @@
+//! Bindings of weight reduction (`crate::reduce`). The Python layer (`skinrs/reduce.py`) checks
+//! dtypes and shapes first; every check is repeated in Rust, so nothing here can panic on bad data.
+
+use ndarray::Array2;
+use numpy::{
+    IntoPyArray, PyArray1, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2,
+    PyReadonlyArray3, PyReadonlyArray4,
+};
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+
+use super::{index_array, sparse_out, to_pyerr, PyProgress, SparseParts};
+use crate::reduce::{self, laplacian, qp, Energy, Method, Poses, ReduceOptions};
+
+fn poses<'a>(
+    control_points: &'a Option<PyReadonlyArray3<'_, f64>>,
+    bone_transforms: &'a Option<PyReadonlyArray4<'_, f64>>,
+) -> PyResult<Option<Poses<'a>>> {
+    match (control_points, bone_transforms) {
+        (Some(_), Some(_)) => Err(PyValueError::new_err(
+            "pass either control_points or bone_transforms, not both",
+        )),
+        (Some(c), None) => Ok(Some(Poses::ControlPoints(c.as_array()))),
+        (None, Some(t)) => Ok(Some(Poses::Bones(t.as_array()))),
+        (None, None) => Ok(None),
+    }
+}
+
+fn usize_to_i64(a: Array2<usize>) -> Array2<i64> {
+    a.mapv(|x| x as i64)
+}
+
+type ReduceOut<'py> = (
+    Bound<'py, PyArray2<i64>>,
+    Bound<'py, PyArray2<f64>>,
+    Vec<f64>,
+    bool,
+    usize,
+    usize,
+);
+
+/// Weight reduction; returns (indices, weights, objective per sweep, converged, colours, qp_capped).
+#[pyfunction]
+#[pyo3(signature = (w, k, method, v=None, f=None, control_points=None, bone_transforms=None,
+                    c=None, nonnegative=false, max_sweeps=1000, tol=1e-4, relaxation=1.9,
+                    energy="gradient", callback=None))]
+#[allow(clippy::too_many_arguments)]
+fn reduce_weights<'py>(
+    py: Python<'py>,
+    w: PyReadonlyArray2<'py, f64>,
+    k: usize,
+    method: &str,
+    v: Option<PyReadonlyArray2<'py, f64>>,
+    f: Option<PyReadonlyArray2<'py, i64>>,
+    control_points: Option<PyReadonlyArray3<'py, f64>>,
+    bone_transforms: Option<PyReadonlyArray4<'py, f64>>,
+    c: Option<PyReadonlyArray2<'py, f64>>,
+    nonnegative: bool,
+    max_sweeps: usize,
+    tol: f64,
+    relaxation: f64,
+    energy: &str,
+    callback: Option<Py<PyAny>>,
+) -> PyResult<ReduceOut<'py>> {
+    let method = Method::parse(method).map_err(to_pyerr)?;
+    let energy = Energy::parse(energy).map_err(to_pyerr)?;
+    let nv = v.as_ref().map_or(0, |v| v.as_array().nrows());
+    let f = match &f {
+        Some(f) => Some(index_array(f, nv, "F")?),
+        None => None,
+    };
+    let p = poses(&control_points, &bone_transforms)?;
+    let w = w.as_array();
+    let v = v.as_ref().map(|v| v.as_array());
+    let c = c.as_ref().map(|c| c.as_array());
+    let opts = ReduceOptions {
+        nonnegative,
+        rest_control_points: c,
+        max_sweeps,
+        tol,
+        relaxation,
+        energy,
+    };
+    let mut progress = PyProgress::new(callback);
+    let r = py
+        .detach(|| {
+            reduce::reduce_weights(
+                w,
+                k,
+                method,
+                v,
+                f.as_ref().map(|f| f.view()),
+                p.as_ref(),
+                &opts,
+                &mut progress,
+            )
+        })
+        .map_err(to_pyerr)?;
+    Ok((
+        usize_to_i64(r.indices).into_pyarray(py),
+        r.weights.into_pyarray(py),
+        r.objective,
+        r.converged,
+        r.colours,
+        r.qp_capped,
+    ))
+}
+
+/// Deformed positions `(p, n, d)` from packed weights.
+#[pyfunction]
+#[pyo3(signature = (v, indices, weights, control_points=None, bone_transforms=None))]
+fn reduce_deform<'py>(
+    py: Python<'py>,
+    v: PyReadonlyArray2<'py, f64>,
+    indices: PyReadonlyArray2<'py, i64>,
+    weights: PyReadonlyArray2<'py, f64>,
+    control_points: Option<PyReadonlyArray3<'py, f64>>,
+    bone_transforms: Option<PyReadonlyArray4<'py, f64>>,
+) -> PyResult<Bound<'py, PyArray3<f64>>> {
+    let p = poses(&control_points, &bone_transforms)?
+        .ok_or_else(|| PyValueError::new_err("pass control_points or bone_transforms"))?;
+    let idx = index_array(&indices, p.handles(), "indices")?;
+    let (v, w) = (v.as_array(), weights.as_array());
+    let x = py
+        .detach(|| reduce::deform_packed(v, idx.view(), w, &p))
+        .map_err(to_pyerr)?;
+    Ok(x.into_pyarray(py))
+}
+
+/// Area-weighted unit vertex normals `(n, 3)`.
+#[pyfunction]
+fn reduce_vertex_normals<'py>(
+    py: Python<'py>,
+    v: PyReadonlyArray2<'py, f64>,
+    f: PyReadonlyArray2<'py, i64>,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let v = v.as_array();
+    let f = index_array(&f, v.nrows(), "F")?;
+    let n = reduce::vertex_normals(v, f.view()).map_err(to_pyerr)?;
+    Ok(n.into_pyarray(py))
+}
+
+/// Approximate normal transform of paper 002 Sec. 5: `(p, n, 3)`.
+#[pyfunction]
+#[pyo3(signature = (normals, indices, weights, control_points=None, bone_transforms=None, c=None))]
+fn reduce_transform_normals<'py>(
+    py: Python<'py>,
+    normals: PyReadonlyArray2<'py, f64>,
+    indices: PyReadonlyArray2<'py, i64>,
+    weights: PyReadonlyArray2<'py, f64>,
+    control_points: Option<PyReadonlyArray3<'py, f64>>,
+    bone_transforms: Option<PyReadonlyArray4<'py, f64>>,
+    c: Option<PyReadonlyArray2<'py, f64>>,
+) -> PyResult<Bound<'py, PyArray3<f64>>> {
+    let p = poses(&control_points, &bone_transforms)?
+        .ok_or_else(|| PyValueError::new_err("pass control_points or bone_transforms"))?;
+    let idx = index_array(&indices, p.handles(), "indices")?;
+    let (nrm, w) = (normals.as_array(), weights.as_array());
+    let c = c.as_ref().map(|c| c.as_array());
+    let x = py
+        .detach(|| reduce::transform_normals(nrm, idx.view(), w, &p, c))
+        .map_err(to_pyerr)?;
+    Ok(x.into_pyarray(py))
+}
+
+type ErrorsOut<'py> = (Bound<'py, PyArray2<f64>>, Vec<f64>, Vec<f64>);
+
+/// Sec. 6 metrics: (per-vertex normal angle (p, n), normal RMS (p,), position RMS % (p,)).
+#[pyfunction]
+fn reduce_deformation_errors<'py>(
+    py: Python<'py>,
+    f: PyReadonlyArray2<'py, i64>,
+    full: PyReadonlyArray3<'py, f64>,
+    approx: PyReadonlyArray3<'py, f64>,
+) -> PyResult<ErrorsOut<'py>> {
+    let (full, approx) = (full.as_array(), approx.as_array());
+    let f = index_array(&f, full.shape()[1], "F")?;
+    let e = py
+        .detach(|| reduce::deformation_errors(f.view(), full, approx))
+        .map_err(to_pyerr)?;
+    Ok((
+        e.normal_angle.into_pyarray(py),
+        e.normal_rms,
+        e.position_rms,
+    ))
+}
+
+/// Forward kinematics: `(m, 3, 4)` absolute bone transforms from relative rotations `(m, 3, 3)`.
+#[pyfunction]
+fn reduce_forward_kinematics<'py>(
+    py: Python<'py>,
+    c: PyReadonlyArray2<'py, f64>,
+    be: PyReadonlyArray2<'py, i64>,
+    rotations: PyReadonlyArray3<'py, f64>,
+) -> PyResult<Bound<'py, PyArray3<f64>>> {
+    let c = c.as_array();
+    let be = index_array(&be, c.nrows(), "BE")?;
+    let t = reduce::forward_kinematics(c, be.view(), rotations.as_array()).map_err(to_pyerr)?;
+    Ok(t.into_pyarray(py))
+}
+
+/// Test hook: the private cotangent Laplacian (CSC parts) and barycentric mass.
+#[pyfunction]
+fn _reduce_cotan_laplacian<'py>(
+    py: Python<'py>,
+    v: PyReadonlyArray2<'py, f64>,
+    f: PyReadonlyArray2<'py, i64>,
+) -> PyResult<(SparseParts<'py>, Bound<'py, PyArray1<f64>>)> {
+    let v = v.as_array();
+    let f = index_array(&f, v.nrows(), "F")?;
+    let l = laplacian::cotan_laplacian(v, f.view()).map_err(to_pyerr)?;
+    let m = laplacian::barycentric_mass(v, f.view()).map_err(to_pyerr)?;
+    Ok((sparse_out(py, &l), m.into_pyarray(py)))
+}
+
+type QpOut<'py> = (
+    Bound<'py, PyArray1<f64>>,
+    Bound<'py, PyArray1<f64>>,
+    Bound<'py, PyArray1<f64>>,
+    usize,
+    bool,
+);
+
+/// Test hook: one local QP `min 1/2 x'Hx + g'x, Ex = e, x >= 0 (optional)` from start `x0`;
+/// returns (x, lambda, mu, iterations, converged).
+#[pyfunction]
+fn _reduce_local_qp<'py>(
+    py: Python<'py>,
+    h: PyReadonlyArray2<'py, f64>,
+    g: PyReadonlyArray1<'py, f64>,
+    e_mat: PyReadonlyArray2<'py, f64>,
+    e_rhs: PyReadonlyArray1<'py, f64>,
+    nonneg: bool,
+    x0: PyReadonlyArray1<'py, f64>,
+) -> PyResult<QpOut<'py>> {
+    let (h, g, e_mat, e_rhs, x0) = (
+        h.as_array(),
+        g.as_array(),
+        e_mat.as_array(),
+        e_rhs.as_array(),
+        x0.as_array(),
+    );
+    let k = g.len();
+    let r = e_rhs.len();
+    if h.dim() != (k, k) || e_mat.dim() != (r, k) || x0.len() != k || r == 0 {
+        return Err(PyValueError::new_err("inconsistent local QP shapes"));
+    }
+    let (h, g, em, er) = (
+        h.iter().copied().collect::<Vec<_>>(),
+        g.to_vec(),
+        e_mat.iter().copied().collect::<Vec<_>>(),
+        e_rhs.to_vec(),
+    );
+    let mut x = x0.to_vec();
+    let (mut lambda, mut mu) = (vec![0.0; r], vec![0.0; k]);
+    let qp = qp::LocalQp {
+        h: &h,
+        g: &g,
+        e_mat: &em,
+        e_rhs: &er,
+        nonneg,
+    };
+    let st = qp::solve(
+        &qp,
+        &mut x,
+        &mut lambda,
+        &mut mu,
+        &mut qp::QpWork::default(),
+    )
+    .map_err(|e| PyValueError::new_err(format!("local QP failed: {e:?}")))?;
+    Ok((
+        x.into_pyarray(py),
+        lambda.into_pyarray(py),
+        mu.into_pyarray(py),
+        st.iterations,
+        st.converged,
+    ))
+}
+
+pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(reduce_weights, m)?)?;
+    m.add_function(wrap_pyfunction!(reduce_deform, m)?)?;
+    m.add_function(wrap_pyfunction!(reduce_vertex_normals, m)?)?;
+    m.add_function(wrap_pyfunction!(reduce_transform_normals, m)?)?;
+    m.add_function(wrap_pyfunction!(reduce_deformation_errors, m)?)?;
+    m.add_function(wrap_pyfunction!(reduce_forward_kinematics, m)?)?;
+    m.add_function(wrap_pyfunction!(_reduce_cotan_laplacian, m)?)?;
+    m.add_function(wrap_pyfunction!(_reduce_local_qp, m)?)?;
+    Ok(())
+}

@@ -1,0 +1,401 @@
+//! Weight reduction (Landreneau & Schaefer 2010, "Poisson-based weight reduction of animated
+//! meshes", paper 002): keep `k` influences per vertex that still deform like the full weights.
+//!
+//! - [`reduce_weights`]: the k-largest baseline, smooth (Sec. 3.1), geometric (3.2, eq. 3) and
+//!   Poisson (3.3, eq. 5) reductions for cages (control points) and skeletons (Sec. 4), solved by
+//!   the parallel local iteration of Sec. 3.1 ([`solver`]) with exact per-vertex QPs ([`qp`]).
+//! - [`deform_packed`], [`transform_normals`] (Sec. 5), [`deformation_errors`] (Sec. 6) and
+//!   [`forward_kinematics`] for example poses.
+
+#![allow(clippy::needless_range_loop)] // index loops mirror the formulas
+
+mod deform;
+pub(crate) mod laplacian;
+pub(crate) mod qp;
+mod solver;
+
+use ndarray::{Array2, ArrayView2, Axis};
+use rayon::prelude::*;
+
+use crate::error::SkinResult;
+use crate::invalid;
+use crate::progress::Progress;
+
+pub use deform::{
+    deform_packed, deformation_errors, forward_kinematics, transform_normals, vertex_normals,
+    DeformationErrors, Poses,
+};
+use solver::{Basis, Coupling, LinearPrecision, Problem, SolveOptions};
+
+/// Which weights to keep and how to set them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Method {
+    /// The k largest weights, renormalised to sum to one (what exporters do).
+    KLargest,
+    /// Sec. 3.1: match the Laplacian of every reduced weight function to the original's.
+    Smooth,
+    /// Sec. 3.2, eq. (3): match the example-pose positions.
+    Geometric,
+    /// Sec. 3.3, eq. (5) (and Sec. 4 for skeletons): match the Laplacian of the deformed positions.
+    Poisson,
+}
+
+impl Method {
+    /// Parses `"k-largest"`, `"smooth"`, `"geometric"` or `"poisson"`.
+    pub fn parse(s: &str) -> SkinResult<Self> {
+        match s {
+            "k-largest" => Ok(Method::KLargest),
+            "smooth" => Ok(Method::Smooth),
+            "geometric" => Ok(Method::Geometric),
+            "poisson" => Ok(Method::Poisson),
+            _ => invalid!(
+                "unknown reduction method {s:?}: use 'k-largest', 'smooth', 'geometric' or 'poisson'"
+            ),
+        }
+    }
+}
+
+/// How the smooth and Poisson methods measure the difference of two functions on the surface.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Energy {
+    /// `int |grad (phi - psi)|^2 dA = e^T (-L) e`: the Poisson problem of Sec. 3.3 in its
+    /// gradient form `min int |grad phi - w|^2`, `w = grad psi`.
+    Gradient,
+    /// `int (lap (phi - psi))^2 dA ~ e^T L M^-1 L e`: eqs. (4)-(5) as printed.
+    SquaredLaplacian,
+}
+
+impl Energy {
+    /// Parses `"gradient"` or `"laplacian"`.
+    pub fn parse(s: &str) -> SkinResult<Self> {
+        match s {
+            "gradient" => Ok(Energy::Gradient),
+            "laplacian" => Ok(Energy::SquaredLaplacian),
+            _ => invalid!("unknown energy {s:?}: use 'gradient' or 'laplacian'"),
+        }
+    }
+}
+
+/// Settings of [`reduce_weights`].
+#[derive(Debug, Clone)]
+pub struct ReduceOptions<'a> {
+    /// Keep every weight `>= 0` (skeletal rigs, harmonic and BBW weights).
+    pub nonnegative: bool,
+    /// Rest control points `C (m, d)` of a cage: the smooth method then enforces linear precision
+    /// `sum_i alpha_i c_i = v`. Only the smooth method uses them.
+    pub rest_control_points: Option<ArrayView2<'a, f64>>,
+    /// Upper bound on the sweeps of the local iteration.
+    pub max_sweeps: usize,
+    /// Stop when a sweep lowers the objective by less than `tol` times its value.
+    pub tol: f64,
+    /// Over-relaxation factor of each block step, in (0, 2); 1 is plain block Gauss-Seidel.
+    pub relaxation: f64,
+    /// Energy of the smooth and Poisson methods.
+    pub energy: Energy,
+}
+
+impl Default for ReduceOptions<'_> {
+    fn default() -> Self {
+        ReduceOptions {
+            nonnegative: false,
+            rest_control_points: None,
+            max_sweeps: 1000,
+            tol: 1e-4,
+            relaxation: 1.9,
+            energy: Energy::Gradient,
+        }
+    }
+}
+
+/// Reduced weights in packed fixed-k form plus how the iteration went.
+#[derive(Debug, Clone)]
+pub struct Reduction {
+    /// `(n, k)` handle indices, per row in decreasing order of the original weight.
+    pub indices: Array2<usize>,
+    /// `(n, k)` weights of those handles; each row sums to one.
+    pub weights: Array2<f64>,
+    /// The global objective before the first sweep and after every sweep (empty for k-largest).
+    pub objective: Vec<f64>,
+    /// Whether the stopping rule was met before `max_sweeps`.
+    pub converged: bool,
+    /// Number of colour classes (parallel batches per sweep).
+    pub colours: usize,
+    /// Local QPs that hit their iteration cap (left feasible, not optimal); normally 0.
+    pub qp_capped: usize,
+}
+
+/// Tolerance on `|sum_i W_vi - 1|` for the methods that need partition of unity.
+const POU_TOL: f64 = 1e-6;
+
+/// Influence sets: the `k` largest weights of every row (ties to the lower index), in decreasing
+/// order.
+fn influence_sets(w: ArrayView2<f64>, k: usize) -> Array2<usize> {
+    let (n, m) = w.dim();
+    let mut sets = Array2::<usize>::zeros((n, k));
+    sets.as_slice_mut()
+        .expect("fresh array is contiguous")
+        .par_chunks_mut(k)
+        .enumerate()
+        .for_each_init(
+            || (0..m).collect::<Vec<usize>>(),
+            |order, (v, out)| {
+                let row = w.row(v);
+                order.iter_mut().enumerate().for_each(|(i, o)| *o = i);
+                let cmp = |a: &usize, b: &usize| row[*b].total_cmp(&row[*a]).then(a.cmp(b));
+                if k < m {
+                    order.select_nth_unstable_by(k - 1, cmp);
+                }
+                order[..k].sort_by(cmp);
+                out.copy_from_slice(&order[..k]);
+            },
+        );
+    sets
+}
+
+/// Checks `W (n, m)` and `k`.
+fn check_weights(w: ArrayView2<f64>, k: usize, method: Method) -> SkinResult<()> {
+    let (n, m) = w.dim();
+    if n == 0 || m == 0 {
+        return invalid!("W must have at least one row and one column, got shape ({n}, {m})");
+    }
+    if k < 1 || k > m {
+        return invalid!("k must be between 1 and the number of handles m = {m}, got {k}");
+    }
+    if let Some(i) = w.iter().position(|x| !x.is_finite()) {
+        return invalid!("W has a NaN or infinite entry (row {})", i / m);
+    }
+    if method != Method::KLargest {
+        for (v, row) in w.rows().into_iter().enumerate() {
+            let s: f64 = row.sum();
+            if (s - 1.0).abs() > POU_TOL {
+                return invalid!(
+                    "W row {v} sums to {s}, not 1 (tolerance {POU_TOL}); {method:?} reduction \
+                     needs partition-of-unity weights: normalise the rows first"
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
+fn need<T>(x: Option<T>, what: &str, method: Method) -> SkinResult<T> {
+    match x {
+        Some(x) => Ok(x),
+        None => invalid!("{method:?} reduction needs {what}"),
+    }
+}
+
+/// Reduces weights to `k` influences per vertex (paper 002).
+///
+/// Inputs:
+/// - `w (n, m)` original weights (rows summing to one except for k-largest);
+/// - `k` influences to keep, `1 <= k <= m`;
+/// - `method`;
+/// - `v (n, d)` rest vertices (d = 2 or 3) and `f (t, 3)` triangles: `v` for skeletons, linear
+///   precision and the Laplacian methods, `f` for smooth and Poisson;
+/// - `poses` example poses: required by geometric and Poisson, unused by k-largest and smooth;
+/// - `opts`, `progress` (one event per sweep, value = objective).
+///
+/// Output: [`Reduction`] with `indices (n, k)` and `weights (n, k)`.
+///
+/// The influence set of each vertex is its `k` largest original weights (Sec. 3). Smooth
+/// reduction of skeletal weights (no rest control points given) has no linear precision: it only
+/// matches the weight Laplacians under sum-to-one (and non-negativity).
+#[allow(clippy::too_many_arguments)]
+pub fn reduce_weights<'a>(
+    w: ArrayView2<'a, f64>,
+    k: usize,
+    method: Method,
+    v: Option<ArrayView2<'a, f64>>,
+    f: Option<ArrayView2<'a, usize>>,
+    poses: Option<&Poses<'a>>,
+    opts: &ReduceOptions<'a>,
+    progress: &mut dyn Progress,
+) -> SkinResult<Reduction> {
+    check_weights(w, k, method)?;
+    let (n, m) = w.dim();
+    if let Some(v) = v {
+        if v.nrows() != n {
+            return invalid!("V must have one row per row of W ({n}), got {}", v.nrows());
+        }
+        if !(2..=3).contains(&v.ncols()) {
+            return invalid!("V must have 2 or 3 columns, got {}", v.ncols());
+        }
+        if v.iter().any(|x| !x.is_finite()) {
+            return invalid!("V has a NaN or infinite entry");
+        }
+    }
+    if let Some(p) = poses {
+        let d = match (p, v) {
+            (_, Some(v)) => v.ncols(),
+            (Poses::ControlPoints(c), None) => c.shape()[2],
+            (Poses::Bones(_), None) => return invalid!("bone_transforms need the rest vertices V"),
+        };
+        p.check(m, d)?;
+    }
+    if !(opts.relaxation > 0.0 && opts.relaxation < 2.0) {
+        return invalid!("relaxation must lie in (0, 2), got {}", opts.relaxation);
+    }
+    if opts.tol.is_nan() || opts.tol < 0.0 {
+        return invalid!("tol must be >= 0, got {}", opts.tol);
+    }
+    if opts.rest_control_points.is_some() && method != Method::Smooth {
+        return invalid!(
+            "the rest control points C (linear precision) are used by the smooth method only"
+        );
+    }
+
+    let sets = influence_sets(w, k);
+    let mut alpha = Array2::<f64>::zeros((n, k));
+    for vi in 0..n {
+        let s: f64 = sets.row(vi).iter().map(|&i| w[[vi, i]]).sum();
+        if s.is_nan() || s <= 0.0 {
+            return invalid!("the k largest weights of W row {vi} sum to {s}: cannot renormalise");
+        }
+        for (t, &i) in sets.row(vi).iter().enumerate() {
+            alpha[[vi, t]] = w[[vi, i]] / s;
+        }
+    }
+    if method == Method::KLargest {
+        if opts.nonnegative {
+            if let Some(i) = alpha.iter().position(|&a| a < 0.0) {
+                return invalid!(
+                    "k-largest keeps a negative weight in row {}; it cannot enforce \
+                     nonnegative=True (use another method, or make W non-negative first)",
+                    i / k
+                );
+            }
+        }
+        return Ok(Reduction {
+            indices: sets,
+            weights: alpha,
+            objective: Vec::new(),
+            converged: true,
+            colours: 0,
+            qp_capped: 0,
+        });
+    }
+
+    if let Some(c) = opts.rest_control_points {
+        let v = need(v, "the rest vertices V for linear precision", method)?;
+        let d = v.ncols();
+        if c.dim() != (m, d) {
+            return invalid!("C must have shape ({m}, {d}), got {:?}", c.dim());
+        }
+        if c.iter().any(|x| !x.is_finite()) {
+            return invalid!("C has a NaN or infinite entry");
+        }
+        if k < d + 1 {
+            return invalid!("linear precision in {d}D needs k >= {}, got k = {k}", d + 1);
+        }
+    }
+    let coupling = match method {
+        Method::Geometric => Coupling::identity(n),
+        _ => {
+            let v = need(v, "the rest vertices V", method)?;
+            let f = need(f, "the triangles F", method)?;
+            let l = laplacian::cotan_laplacian(v, f)?;
+            match opts.energy {
+                Energy::Gradient => Coupling::dirichlet(&l),
+                Energy::SquaredLaplacian => {
+                    let mass = laplacian::barycentric_mass(v, f)?;
+                    Coupling::squared_laplacian(&l, &mass)
+                }
+            }
+        }
+    };
+    // Renumber the vertices colour class by colour class (see `solver`).
+    let (order, classes) = coupling.colour_order();
+    let coupling = coupling.permuted(&order);
+    let rows = |a: ArrayView2<f64>| a.select(Axis(0), &order);
+    let sets_p = sets.select(Axis(0), &order);
+    let mut alpha_p = alpha.select(Axis(0), &order);
+    let w_p = rows(w);
+    let v_p = v.map(rows);
+    let (basis, target) = match method {
+        Method::Smooth => (Basis::Select { m }, w_p),
+        _ => {
+            let p = *need(
+                poses,
+                "example poses (control_points or bone_transforms)",
+                method,
+            )?;
+            pose_basis(w_p.view(), v_p.as_ref().map(|v| v.view()), p, &sets_p)?
+        }
+    };
+    let lp = match (opts.rest_control_points, v_p) {
+        (Some(c), Some(v)) => Some(LinearPrecision { rest_points: c, v }),
+        _ => None,
+    };
+    let problem = Problem {
+        sets: sets_p,
+        basis,
+        coupling,
+        target,
+        lp,
+        nonneg: opts.nonnegative,
+        classes,
+        order,
+    };
+    problem.make_feasible(&mut alpha_p)?;
+    let report = problem.solve(
+        &mut alpha_p,
+        &SolveOptions {
+            max_sweeps: opts.max_sweeps,
+            tol: opts.tol,
+            relaxation: opts.relaxation,
+        },
+        progress,
+    )?;
+    for (i, &vi) in problem.order.iter().enumerate() {
+        alpha.row_mut(vi).assign(&alpha_p.row(i));
+    }
+    Ok(Reduction {
+        indices: sets,
+        weights: alpha,
+        objective: report.objective,
+        converged: report.converged,
+        colours: problem.classes.len() - 1,
+        qp_capped: report.qp_capped,
+    })
+}
+
+/// The basis of the pose-matching methods and the full-weight deformation `Xbar (n, q)`.
+fn pose_basis(
+    w: ArrayView2<f64>,
+    v: Option<ArrayView2<f64>>,
+    poses: Poses,
+    sets: &Array2<usize>,
+) -> SkinResult<(Basis, Array2<f64>)> {
+    let (n, m) = w.dim();
+    let p = poses.count();
+    match poses {
+        Poses::ControlPoints(c) => {
+            let d = c.shape()[2];
+            // cq row i = c_i over all poses; Xbar = W cq.
+            let mut cq = Array2::<f64>::zeros((m, p * d));
+            for i in 0..m {
+                for j in 0..p {
+                    for a in 0..d {
+                        cq[[i, j * d + a]] = c[[j, i, a]];
+                    }
+                }
+            }
+            let gram = cq.dot(&cq.t());
+            let target = w.dot(&cq);
+            Ok((Basis::Cage { cq, gram }, target))
+        }
+        Poses::Bones(_) => {
+            let v = match v {
+                Some(v) => v,
+                None => return invalid!("bone_transforms need the rest vertices V"),
+            };
+            let idx = Array2::from_shape_fn((n, m), |(_, i)| i);
+            let x = deform_packed(v, idx.view(), w, &poses)?;
+            let d = v.ncols();
+            // (p, n, d) -> (n, p * d)
+            let target = Array2::from_shape_fn((n, p * d), |(vi, c)| x[[c / d, vi, c % d]]);
+            Ok((Basis::bones(&poses, v, sets), target))
+        }
+    }
+}
