@@ -27,7 +27,7 @@ from .operators import biharmonic_matrix
 #: unit-size meshes it equals libigl's test ``squared distance <= 1e-7``.
 DEFAULT_BC_TOL = 3.1622776601683795e-4
 
-SOLVERS = ("lbfgs-squared",)
+SOLVERS = ("active-set", "lbfgs-squared")
 
 
 def boundary_conditions(V, C, P=None, BE=None, *, tol=DEFAULT_BC_TOL):
@@ -97,7 +97,7 @@ def bbw_dual_constrained(
     partition_of_unity=True,
     normalize=True,
     mass="voronoi",
-    solver="lbfgs-squared",
+    solver="active-set",
     tol=1e-9,
     max_iter=100_000,
     seed=0,

@@ -7,6 +7,7 @@
 //! is the recovered primal `W = R + Q11 Y P_m` (eqs. 15-16) ([`dual`]); it is solved by L-BFGS on
 //! `Y = U o U` (the paper's method, [`lbfgs`]) and stopped on a measured duality gap.
 
+pub mod active_set;
 pub mod dual;
 pub mod lbfgs;
 pub mod problem;

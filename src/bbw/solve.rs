@@ -21,18 +21,24 @@ pub enum Solver {
     /// The paper's method (Sec. 6, 8): L-BFGS on `Y = U o U` from a random start scaled so each
     /// column of `U o U` sums to 1.
     LbfgsSquared,
+    /// The default: a short L-BFGS run to guess the zero set of `W`, then a primal-dual active
+    /// set method that solves the equality-constrained problem on the guessed support exactly
+    /// and swaps KKT violators ([`super::active_set`]).
+    ActiveSet,
 }
 
 impl Solver {
     pub fn parse(s: &str) -> SkinResult<Self> {
         match s {
             "lbfgs-squared" => Ok(Solver::LbfgsSquared),
-            _ => invalid!("unknown solver {s:?}; choose one of \"lbfgs-squared\""),
+            "active-set" => Ok(Solver::ActiveSet),
+            _ => invalid!("unknown solver {s:?}; choose one of \"active-set\", \"lbfgs-squared\""),
         }
     }
     pub fn name(self) -> &'static str {
         match self {
             Solver::LbfgsSquared => "lbfgs-squared",
+            Solver::ActiveSet => "active-set",
         }
     }
 }
@@ -54,7 +60,7 @@ pub struct BbwOptions {
 impl Default for BbwOptions {
     fn default() -> Self {
         BbwOptions {
-            solver: Solver::LbfgsSquared,
+            solver: Solver::ActiveSet,
             tol: 1e-9,
             max_iter: 100_000,
             partition_of_unity: true,
@@ -68,9 +74,14 @@ impl Default for BbwOptions {
 #[derive(Debug, Clone, Default)]
 pub struct BbwInfo {
     pub solver: String,
+    /// L-BFGS iterations (for `active-set`: those of the warm start).
     pub iterations: usize,
     /// Objective/gradient evaluations, i.e. multi-column solves with the Cholesky factor.
     pub evaluations: usize,
+    /// Active-set rounds (support guesses solved exactly) and the conjugate-gradient iterations
+    /// they took in total; zero for `lbfgs-squared`.
+    pub rounds: usize,
+    pub cg_iterations: usize,
     /// `1/2 tr(W^T B W)` of the returned (feasible) weights.
     pub energy: f64,
     /// Best lower bound on the optimal energy found (Lagrangian of the dual).
@@ -85,14 +96,18 @@ pub struct BbwInfo {
     pub min_raw_weight: f64,
     pub max_raw_weight: f64,
     pub converged: bool,
+    /// Seconds: assembly + Cholesky of `B_ff`, the whole solve, and within it the L-BFGS phase
+    /// and the active-set phase.
     pub time_factor: f64,
     pub time_solve: f64,
+    pub time_lbfgs: f64,
+    pub time_active_set: f64,
 }
 
 /// Solves BBW on an eliminated problem. Returns the full `n x m` weights (rows of `b` equal `bc`)
-/// and diagnostics. The returned weights are the projection of the best dual iterate's recovered
-/// `W` onto the feasible set (clamped and, with partition of unity, row-normalised), so they are
-/// always feasible and their energy is within `gap` of the optimum.
+/// and diagnostics. The returned weights are always feasible (the best projected iterate:
+/// clamped and, with partition of unity, row-normalised) and their energy is within `gap` of the
+/// optimum.
 pub fn bbw_dual(
     prob: &EliminatedProblem,
     opts: &BbwOptions,
@@ -102,13 +117,76 @@ pub fn bbw_dual(
         return invalid!("tol must be a positive finite number, got {}", opts.tol);
     }
     let t0 = Instant::now();
-    let (nf, m) = (prob.nf(), prob.m);
-    let nvar = if opts.partition_of_unity {
-        nf * m
-    } else {
-        2 * nf * m
+    let mut best = Best::new();
+    let mut info = BbwInfo {
+        solver: opts.solver.name().to_string(),
+        time_factor: prob.time_factor,
+        ..Default::default()
     };
+    if prob.nf() == 0 {
+        // Every vertex is constrained: nothing to solve.
+        let dp = DualPoint {
+            objective: 0.0,
+            w: vec![],
+            lower_bound: prob.c0,
+        };
+        best.update(&dp, vec![], prob.c0);
+    } else {
+        match opts.solver {
+            Solver::LbfgsSquared => {
+                let t = Instant::now();
+                let start = random_start(prob.nf(), prob.m, blocks(opts), opts.seed);
+                run_lbfgs(prob, opts, opts.tol, start, &mut best, &mut info, progress)?;
+                info.time_lbfgs = t.elapsed().as_secs_f64();
+            }
+            Solver::ActiveSet => {
+                super::active_set::solve(prob, opts, &mut best, &mut info, progress)?;
+            }
+        }
+    }
+    info.energy = best.upper;
+    info.lower_bound = best.lower;
+    info.dual_objective = best.dual_objective;
+    info.gap = best.upper - best.lower;
+    info.relative_gap = best.relative_gap();
+    info.min_raw_weight = best.min_raw;
+    info.max_raw_weight = best.max_raw;
+    info.converged = best.relative_gap() <= opts.tol;
+    info.time_solve = t0.elapsed().as_secs_f64();
+    Ok((prob.full_weights(&best.w), info))
+}
 
+/// Number of `nf x m` blocks of dual variables: `Y` with partition of unity, `(Y, U)` without.
+fn blocks(opts: &BbwOptions) -> usize {
+    if opts.partition_of_unity {
+        1
+    } else {
+        2
+    }
+}
+
+/// Projects recovered weights onto the primal feasible set of the variant being solved.
+pub(crate) fn project(opts: &BbwOptions, w: &[f64], nf: usize, m: usize) -> Vec<f64> {
+    if opts.partition_of_unity {
+        project_pou(w, nf, m)
+    } else {
+        project_box(w)
+    }
+}
+
+/// The paper's solver: L-BFGS on the dual in `U` with `Y = U o U`, from `start`, until the
+/// duality gap of the best projected iterate is at most `tol` (relative) or `opts.max_iter`.
+/// Adds its iterations and evaluations to `info`.
+pub(crate) fn run_lbfgs(
+    prob: &EliminatedProblem,
+    opts: &BbwOptions,
+    tol: f64,
+    mut u: Vec<f64>,
+    best: &mut Best,
+    info: &mut BbwInfo,
+    progress: &mut dyn Progress,
+) -> SkinResult<Vec<f64>> {
+    let (nf, m) = (prob.nf(), prob.m);
     let eval = |y: &[f64]| -> DualPoint {
         if opts.partition_of_unity {
             pou_eval(prob, y)
@@ -116,116 +194,71 @@ pub fn bbw_dual(
             box_eval(prob, &y[..nf * m], &y[nf * m..])
         }
     };
-    let project = |w: &[f64]| {
-        if opts.partition_of_unity {
-            project_pou(w, nf, m)
-        } else {
-            project_box(w)
-        }
-    };
-
-    let mut best = Best::new();
-    let mut iterations = 0;
+    let last: RefCell<Option<DualPoint>> = RefCell::new(None);
     let mut evaluations = 0;
-    if nf > 0 {
-        let mut u = random_start(nf, m, nvar / (nf * m), opts.seed);
-        let last: RefCell<Option<DualPoint>> = RefCell::new(None);
-        let fg = |u: &[f64], grad: &mut [f64]| -> f64 {
-            evaluations += 1;
-            let y: Vec<f64> = u.iter().map(|v| v * v).collect();
-            let dp = eval(&y);
-            // d f(U o U) / dU = 2 U o grad_Y f, with grad_Y f = W (eq. 16) or (W, 1 - W).
-            for k in 0..nf * m {
-                grad[k] = 2.0 * u[k] * dp.w[k];
-            }
-            for k in nf * m..u.len() {
-                grad[k] = 2.0 * u[k] * (1.0 - dp.w[k - nf * m]);
-            }
-            let f = dp.objective;
-            *last.borrow_mut() = Some(dp);
-            f
-        };
-        let lopts = LbfgsOptions {
-            memory: opts.memory,
-            max_iter: opts.max_iter,
-        };
-        iterations = minimize(&mut u, &lopts, fg, |it, _x, _f, _g| {
-            // The certificate costs a sparse product; checking it every few iterations keeps the
-            // stop at most GAP_EVERY - 1 iterations late.
-            if it % GAP_EVERY != 0 {
-                progress.report(Event {
-                    stage: "dual",
-                    iteration: it,
-                    value: best.relative_gap(),
-                })?;
-                return Ok(Step::Continue);
-            }
+    let fg = |u: &[f64], grad: &mut [f64]| -> f64 {
+        evaluations += 1;
+        let y: Vec<f64> = u.iter().map(|v| v * v).collect();
+        let dp = eval(&y);
+        // d f(U o U) / dU = 2 U o grad_Y f, with grad_Y f = W (eq. 16) or (W, 1 - W).
+        for k in 0..nf * m {
+            grad[k] = 2.0 * u[k] * dp.w[k];
+        }
+        for k in nf * m..u.len() {
+            grad[k] = 2.0 * u[k] * (1.0 - dp.w[k - nf * m]);
+        }
+        let f = dp.objective;
+        *last.borrow_mut() = Some(dp);
+        f
+    };
+    let lopts = LbfgsOptions {
+        memory: opts.memory,
+        max_iter: opts.max_iter,
+    };
+    let iterations = minimize(&mut u, &lopts, fg, |it, _x, _f, _g| {
+        // The certificate costs a sparse product; checking it every few iterations keeps the
+        // stop at most GAP_EVERY - 1 iterations late.
+        if it % GAP_EVERY == 0 {
             let dp = last.borrow();
             let dp = dp.as_ref().expect("objective evaluated before monitor");
-            let feasible = project(&dp.w);
+            let feasible = project(opts, &dp.w, nf, m);
             let upper = prob.energy(&feasible);
             best.update(dp, feasible, upper);
-            progress.report(Event {
-                stage: "dual",
-                iteration: it,
-                value: best.relative_gap(),
-            })?;
-            Ok(if best.relative_gap() <= opts.tol {
-                Step::Stop
-            } else {
-                Step::Continue
-            })
-        })?;
-        // Certify the final iterate too (the loop may end between two gap checks).
-        let final_point = last.borrow_mut().take();
-        if let Some(dp) = final_point {
-            let feasible = project(&dp.w);
-            let upper = prob.energy(&feasible);
-            best.update(&dp, feasible, upper);
         }
-    } else {
-        // Every vertex is constrained: nothing to solve.
-        best.update(
-            &DualPoint {
-                objective: 0.0,
-                w: vec![],
-                lower_bound: prob.c0,
-            },
-            vec![],
-            prob.c0,
-        );
+        progress.report(Event {
+            stage: "dual",
+            iteration: it,
+            value: best.relative_gap(),
+        })?;
+        Ok(if it % GAP_EVERY == 0 && best.relative_gap() <= tol {
+            Step::Stop
+        } else {
+            Step::Continue
+        })
+    })?;
+    // Certify the final iterate too (the loop may end between two gap checks).
+    if let Some(dp) = last.borrow_mut().take() {
+        let feasible = project(opts, &dp.w, nf, m);
+        let upper = prob.energy(&feasible);
+        best.update(&dp, feasible, upper);
     }
-
-    let info = BbwInfo {
-        solver: opts.solver.name().to_string(),
-        iterations,
-        evaluations,
-        energy: best.upper,
-        lower_bound: best.lower,
-        dual_objective: best.dual_objective,
-        gap: best.upper - best.lower,
-        relative_gap: best.relative_gap(),
-        min_raw_weight: best.min_raw,
-        max_raw_weight: best.max_raw,
-        converged: best.relative_gap() <= opts.tol,
-        time_factor: prob.time_factor,
-        time_solve: t0.elapsed().as_secs_f64(),
-    };
-    Ok((prob.full_weights(&best.w), info))
+    info.iterations += iterations;
+    info.evaluations += evaluations;
+    Ok(u)
 }
 
 /// Best certified pair seen so far: the lowest feasible energy and the highest lower bound.
-struct Best {
-    upper: f64,
-    lower: f64,
-    w: Vec<f64>,
-    dual_objective: f64,
-    min_raw: f64,
-    max_raw: f64,
+pub(crate) struct Best {
+    pub upper: f64,
+    pub lower: f64,
+    pub w: Vec<f64>,
+    pub dual_objective: f64,
+    pub min_raw: f64,
+    pub max_raw: f64,
 }
 
 impl Best {
-    fn new() -> Self {
+    pub fn new() -> Self {
         Best {
             upper: f64::INFINITY,
             lower: f64::NEG_INFINITY,
@@ -235,23 +268,28 @@ impl Best {
             max_raw: f64::NAN,
         }
     }
-    fn update(&mut self, dp: &DualPoint, feasible: Vec<f64>, upper: f64) {
+    /// Records the dual point's lower bound and, if it is better, the projected primal.
+    pub fn update(&mut self, dp: &DualPoint, feasible: Vec<f64>, upper: f64) {
         self.lower = self.lower.max(dp.lower_bound);
         self.dual_objective = dp.objective;
+        self.offer(&dp.w, feasible, upper);
+    }
+    /// Records a feasible point (projected from `raw`) if its energy is lower.
+    pub fn offer(&mut self, raw: &[f64], feasible: Vec<f64>, upper: f64) {
         if upper < self.upper {
             self.upper = upper;
             self.w = feasible;
-            self.min_raw = dp.w.iter().copied().fold(f64::INFINITY, f64::min);
-            self.max_raw = dp.w.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            self.min_raw = raw.iter().copied().fold(f64::INFINITY, f64::min);
+            self.max_raw = raw.iter().copied().fold(f64::NEG_INFINITY, f64::max);
         }
     }
-    fn relative_gap(&self) -> f64 {
+    pub fn relative_gap(&self) -> f64 {
         (self.upper - self.lower).max(0.0) / self.upper.abs().max(1e-300)
     }
 }
 
 /// The paper's start (Sec. 8): uniform random `U`, scaled so each column of `U o U` sums to 1.
-fn random_start(nf: usize, m: usize, blocks: usize, seed: u64) -> Vec<f64> {
+pub(crate) fn random_start(nf: usize, m: usize, blocks: usize, seed: u64) -> Vec<f64> {
     let mut state = seed ^ 0x9E37_79B9_7F4A_7C15;
     let mut next = move || {
         // splitmix64

@@ -128,6 +128,8 @@ fn py_bbw_dual<'py>(
     d.set_item("solver", info.solver)?;
     d.set_item("iterations", info.iterations)?;
     d.set_item("evaluations", info.evaluations)?;
+    d.set_item("rounds", info.rounds)?;
+    d.set_item("cg_iterations", info.cg_iterations)?;
     d.set_item("energy", info.energy)?;
     d.set_item("lower_bound", info.lower_bound)?;
     d.set_item("dual_objective", info.dual_objective)?;
@@ -138,6 +140,8 @@ fn py_bbw_dual<'py>(
     d.set_item("converged", info.converged)?;
     d.set_item("time_factor", info.time_factor)?;
     d.set_item("time_solve", info.time_solve)?;
+    d.set_item("time_lbfgs", info.time_lbfgs)?;
+    d.set_item("time_active_set", info.time_active_set)?;
     Ok((w.into_pyarray(py), d))
 }
 
