@@ -16,7 +16,12 @@ import skinrs
 REF = Path(__file__).parent / "reference"
 QP_CASES = [p.stem for p in sorted(REF.glob("*.npz")) if "W_qp" in np.load(p).files]
 SOLVERS = skinrs.bbw.SOLVERS
-TOL = 1e-8  # relative duality gap asked of the solver
+# Relative duality gap asked of each solver. The gap bounds the energy, not max |dW|: where the
+# energy is flat (fringes of the supports) a 1e-8 gap still allows |dW| ~ 1e-4 on hand-403.
+# The active set costs only a few rounds more for 1e-10 (~exact); the paper's solver needs
+# ~7,000 iterations (minutes) for 1e-8 on hand-403, and 1e-7 meets the criteria there.
+TOL = {"active-set": 1e-10, "lbfgs-squared": 1e-8}
+TOL_SLOW = {("hand", "lbfgs-squared"): 1e-7}
 
 
 def load(case):
@@ -43,13 +48,16 @@ def test_pou_weights_match_qp(case, solver):
         f["bc"],
         mass=str(f["mass_kind"]),
         solver=solver,
-        tol=TOL,
+        tol=TOL_SLOW.get((case, solver), TOL[solver]),
         return_info=True,
     )
     E_qp = float(f["energy"])
     dW = np.abs(W - f["W_qp"]).max()
     relE = (info["energy"] - E_qp) / E_qp
-    print(f"{case} {solver}: {info['iterations']} it, max|dW| {dW:.2e}, rel energy {relE:.2e}")
+    print(
+        f"{case} {solver}: {info['iterations']} it, {info['rounds']} rounds, "
+        f"{info['time_solve']:.2f} s, max|dW| {dW:.2e}, rel energy {relE:.2e}"
+    )
     assert info["converged"]
     assert dW <= 1e-4
     assert abs(relE) <= 1e-6
@@ -64,7 +72,18 @@ def test_pou_weights_match_qp(case, solver):
     assert skinrs.biharmonic_energy(W, B) == pytest.approx(info["energy"], rel=1e-10)
 
 
-def test_no_pou_reproduces_libigl_test_oracle(data_dir):
+def test_default_solver_is_active_set_and_reports_phases():
+    f = load("bar")
+    _, info = skinrs.bbw_dual_constrained(f["V"], f["T"], f["b"], f["bc"], return_info=True)
+    assert info["solver"] == "active-set"
+    assert info["rounds"] >= 1 and info["cg_iterations"] >= 1
+    assert info["relative_gap"] <= 1e-9
+    for k in ("time_factor", "time_lbfgs", "time_active_set", "time_solve"):
+        assert 0 <= info[k] <= info["time_solve"] + info["time_factor"]
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_no_pou_reproduces_libigl_test_oracle(data_dir, solver):
     """libigl's tests/include/igl/bbw.cpp: bbw on decimated-knight equals the MATLAB active-set
     weights to 1e-4 (raw, not normalised). libigl's bbw uses its default mass matrix, which is
     barycentric for tets."""
@@ -80,11 +99,12 @@ def test_no_pou_reproduces_libigl_test_oracle(data_dir):
         partition_of_unity=False,
         normalize=False,
         mass="barycentric",
+        solver=solver,
         tol=1e-9,
         return_info=True,
     )
     err = np.abs(W - W_ref).max()
-    print(f"knight no-PoU: {info['iterations']} it, max|dW| vs oracle {err:.2e}")
+    print(f"knight no-PoU {solver}: {info['iterations']} it, max|dW| vs oracle {err:.2e}")
     assert err <= 1e-4
     assert W.min() >= 0 and W.max() <= 1
     # Normalised variant: rows sum to one.

@@ -274,6 +274,11 @@ impl Best {
         self.dual_objective = dp.objective;
         self.offer(&dp.w, feasible, upper);
     }
+    /// Records the dual point's lower bound only.
+    pub fn bound(&mut self, dp: &DualPoint) {
+        self.lower = self.lower.max(dp.lower_bound);
+        self.dual_objective = dp.objective;
+    }
     /// Records a feasible point (projected from `raw`) if its energy is lower.
     pub fn offer(&mut self, raw: &[f64], feasible: Vec<f64>, upper: f64) {
         if upper < self.upper {
