@@ -330,3 +330,23 @@ def test_empty_query_sets():
     assert skinrs.segment_visible(V, E, np.zeros((0, 2)), np.zeros((0, 2))).shape == (0,)
     d, p, f, n = skinrs.closest_point(V, E, np.zeros((0, 2)))
     assert d.shape == (0,) and p.shape == (0, 2) and f.shape == (0,) and n.shape == (0, 2)
+
+
+def test_large_batches_keep_query_order(data_dir):
+    # Batches of >= 1024 queries run in Morton order internally; results must come back in
+    # query order, identical to small batches (which run in order).
+    V, F = _load(data_dir, "soup")
+    rng = np.random.default_rng(9)
+    P, Q = _box_points(V, 3000, rng), _box_points(V, 3000, rng)
+    chunks = [slice(0, 1000), slice(1000, 2000), slice(2000, 3000)]
+    w = skinrs.winding_number(V, F, Q)
+    np.testing.assert_array_equal(
+        w, np.concatenate([skinrs.winding_number(V, F, Q[c]) for c in chunks])
+    )
+    vis = skinrs.segment_visible(V, F, P, Q)
+    ref = np.concatenate([skinrs.segment_visible(V, F, P[c], Q[c]) for c in chunks])
+    np.testing.assert_array_equal(vis, ref)
+    big = skinrs.closest_point(V, F, Q)
+    small = [skinrs.closest_point(V, F, Q[c]) for c in chunks]
+    for a, parts in zip(big, zip(*small)):
+        np.testing.assert_array_equal(a, np.concatenate(parts))

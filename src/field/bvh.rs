@@ -23,7 +23,7 @@
 use ndarray::{ArrayView2, Axis};
 use rayon::prelude::*;
 
-use super::{add, cross, cross2, dot, norm2, row, scale, sub, P2, P3};
+use super::{add, coherent_order, cross, cross2, dot, norm2, row, scale, scatter, sub, P2, P3};
 use crate::error::SkinResult;
 use crate::invalid;
 
@@ -292,6 +292,15 @@ const LEAF_SIZE: usize = 4;
 impl<const D: usize> Boundary<D> {
     /// Copies `v` (#V by D) and `f` (#F by D, indices into `v`) and builds the tree.
     pub fn new(v: ArrayView2<f64>, f: ArrayView2<usize>) -> SkinResult<Self> {
+        Self::with_leaf_size(v, f, LEAF_SIZE)
+    }
+
+    /// As [`Boundary::new`] with at most `leaf_size` (>= 1) primitives per leaf.
+    pub fn with_leaf_size(
+        v: ArrayView2<f64>,
+        f: ArrayView2<usize>,
+        leaf_size: usize,
+    ) -> SkinResult<Self> {
         if v.ncols() != D || f.ncols() != D {
             return invalid!(
                 "boundary in {D}D needs V with {D} columns and F with {D} columns, got V {:?} and F {:?}",
@@ -328,7 +337,7 @@ impl<const D: usize> Boundary<D> {
                 b
             })
             .collect();
-        let bvh = Bvh::build(&boxes, LEAF_SIZE);
+        let bvh = Bvh::build(&boxes, leaf_size);
         Ok(Boundary { verts, elems, bvh })
     }
 
@@ -438,19 +447,23 @@ pub trait BoundaryQueries<const D: usize>: Sync {
                 q.nrows()
             );
         }
-        Ok((0..p.nrows())
-            .into_par_iter()
-            .map(|i| self.segment_hits(&row(&p, i), &row(&q, i)))
-            .collect())
+        let order = coherent_order::<D>(&p);
+        let vals: Vec<bool> = order
+            .par_iter()
+            .map(|&i| self.segment_hits(&row(&p, i), &row(&q, i)))
+            .collect();
+        Ok(scatter(&order, vals))
     }
 
     /// `closest` for each row of `x` (#X by D), in parallel.
     fn closest_batch(&self, x: ArrayView2<f64>) -> SkinResult<Vec<Closest<D>>> {
         check_queries::<D>(&x, "Q")?;
-        Ok((0..x.nrows())
-            .into_par_iter()
-            .map(|i| self.closest(&row(&x, i)))
-            .collect())
+        let order = coherent_order::<D>(&x);
+        let vals: Vec<Closest<D>> = order
+            .par_iter()
+            .map(|&i| self.closest(&row(&x, i)))
+            .collect();
+        Ok(scatter(&order, vals))
     }
 }
 

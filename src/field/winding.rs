@@ -32,11 +32,13 @@ use ndarray::ArrayView2;
 use rayon::prelude::*;
 
 use super::bvh::{check_queries, Aabb, Boundary};
-use super::{add, cross, cross2, dot, norm2, row, scale, sub, P2, P3};
+use super::{add, cross, cross2, dot, norm2, par_map_coherent, row, scale, sub, P2, P3};
 use crate::error::SkinResult;
 use crate::invalid;
 
 const FOUR_PI: f64 = 4.0 * std::f64::consts::PI;
+/// Triangles per leaf of the winding-number tree (exact solid angles below that).
+const WINDING_LEAF: usize = 8;
 const TWO_PI: f64 = 2.0 * std::f64::consts::PI;
 
 /// Per-node far-field data.
@@ -134,7 +136,7 @@ impl FastWinding {
         if beta.is_nan() || beta <= 0.0 {
             return invalid!("beta must be positive, got {beta}");
         }
-        let boundary = Boundary::<3>::new(v, f)?;
+        let boundary = Boundary::<3>::with_leaf_size(v, f, WINDING_LEAF)?;
         let b = &boundary;
         let exp = b
             .bvh
@@ -188,10 +190,7 @@ impl FastWinding {
     /// Winding numbers at the rows of `q` (#Q by 3), in parallel.
     pub fn eval_batch(&self, q: ArrayView2<f64>) -> SkinResult<Vec<f64>> {
         check_queries::<3>(&q, "Q")?;
-        Ok((0..q.nrows())
-            .into_par_iter()
-            .map(|i| self.eval(&row(&q, i)))
-            .collect())
+        Ok(par_map_coherent(&q, |x: &P3| self.eval(x)))
     }
 }
 
