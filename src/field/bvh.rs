@@ -142,40 +142,55 @@ impl<const D: usize> Bvh<D> {
     /// primitives per leaf.
     pub fn build(boxes: &[Aabb<D>], leaf_size: usize) -> Self {
         let n = boxes.len();
-        let centers: Vec<[f64; D]> = boxes.iter().map(|b| b.center()).collect();
-        let mut bvh = Bvh {
-            nodes: Vec::with_capacity(2 * n / leaf_size.max(1) + 1),
-            order: (0..n as u32).collect(),
+        let centers: Vec<[f64; D]> = boxes.par_iter().map(|b| b.center()).collect();
+        let mut order: Vec<u32> = (0..n as u32).collect();
+        let b = Builder {
+            boxes,
+            centers: &centers,
+            leaf_size: leaf_size.max(1),
         };
-        bvh.split(boxes, &centers, 0, n, leaf_size.max(1));
-        bvh
+        let nodes = b.subtree(&mut order, 0);
+        Bvh { nodes, order }
+    }
+}
+
+struct Builder<'a, const D: usize> {
+    boxes: &'a [Aabb<D>],
+    centers: &'a [[f64; D]],
+    leaf_size: usize,
+}
+
+/// Subtrees larger than this are built on two threads (`rayon::join`); below it the cost of
+/// concatenating node arrays would outweigh the gain.
+const PAR_BUILD: usize = 8192;
+
+impl<const D: usize> Builder<'_, D> {
+    /// Nodes of the subtree over `order` (which starts at `start` in the full permutation), in
+    /// depth-first order with child indices relative to the subtree's root.
+    fn subtree(&self, order: &mut [u32], start: usize) -> Vec<Node<D>> {
+        let mut nodes = Vec::with_capacity(2 * order.len() / self.leaf_size + 1);
+        self.split(order, start, &mut nodes);
+        nodes
     }
 
-    /// Appends the subtree over `order[start..end]`, returns its node index.
-    fn split(
-        &mut self,
-        boxes: &[Aabb<D>],
-        centers: &[[f64; D]],
-        start: usize,
-        end: usize,
-        leaf_size: usize,
-    ) -> usize {
+    /// Appends the subtree over `order` to `nodes`.
+    fn split(&self, order: &mut [u32], start: usize, nodes: &mut Vec<Node<D>>) {
         let mut bbox = Aabb::empty();
         let mut cbox = Aabb::empty();
-        for &i in &self.order[start..end] {
-            bbox.merge(&boxes[i as usize]);
-            cbox.grow(&centers[i as usize]);
+        for &i in order.iter() {
+            bbox.merge(&self.boxes[i as usize]);
+            cbox.grow(&self.centers[i as usize]);
         }
-        let id = self.nodes.len();
-        self.nodes.push(Node {
+        let id = nodes.len();
+        let count = order.len();
+        nodes.push(Node {
             bbox,
             start: start as u32,
-            count: (end - start) as u32,
+            count: count as u32,
             right: 0,
         });
-        let count = end - start;
-        if count <= leaf_size {
-            return id;
+        if count <= self.leaf_size {
+            return;
         }
         // Split axis: longest extent of the centroids.
         let mut axis = 0;
@@ -186,36 +201,45 @@ impl<const D: usize> Bvh<D> {
         }
         let (lo, ext) = (cbox.lo[axis], cbox.hi[axis] - cbox.lo[axis]);
         let mid = if ext > 0.0 {
-            self.sah_partition(boxes, centers, start, end, axis, lo, ext)
+            self.sah_partition(order, axis, lo, ext)
         } else {
             None
         };
         // Coincident centroids or no useful plane: split the list in half (keeps depth bounded).
-        let mid = mid.unwrap_or(start + count / 2);
-        self.split(boxes, centers, start, mid, leaf_size);
-        let right = self.split(boxes, centers, mid, end, leaf_size);
-        self.nodes[id].right = right as u32;
-        id
+        let mid = mid.unwrap_or(count / 2);
+        let (left, right) = order.split_at_mut(mid);
+        if count > PAR_BUILD {
+            let (l, r) = rayon::join(
+                || self.subtree(left, start),
+                || self.subtree(right, start + mid),
+            );
+            let shift = |mut n: Node<D>, by: usize| {
+                if !n.is_leaf() {
+                    n.right += by as u32;
+                }
+                n
+            };
+            let base = id + 1;
+            nodes[id].right = (base + l.len()) as u32;
+            let nl = l.len();
+            nodes.extend(l.into_iter().map(|n| shift(n, base)));
+            nodes.extend(r.into_iter().map(|n| shift(n, base + nl)));
+        } else {
+            self.split(left, start, nodes);
+            nodes[id].right = nodes.len() as u32;
+            self.split(right, start + mid, nodes);
+        }
     }
 
-    /// Binned SAH along `axis`; partitions `order[start..end]` and returns the split index.
-    #[allow(clippy::too_many_arguments)]
-    fn sah_partition(
-        &mut self,
-        boxes: &[Aabb<D>],
-        centers: &[[f64; D]],
-        start: usize,
-        end: usize,
-        axis: usize,
-        lo: f64,
-        ext: f64,
-    ) -> Option<usize> {
-        let bin_of = |c: &[f64; D]| (((c[axis] - lo) / ext * BINS as f64) as usize).min(BINS - 1);
+    /// Binned SAH along `axis`; partitions `order` and returns the split index.
+    fn sah_partition(&self, order: &mut [u32], axis: usize, lo: f64, ext: f64) -> Option<usize> {
+        let scale = BINS as f64 / ext;
+        let bin_of = |c: &[f64; D]| (((c[axis] - lo) * scale) as usize).min(BINS - 1);
         let mut bin_box = [Aabb::<D>::empty(); BINS];
         let mut bin_n = [0usize; BINS];
-        for &i in &self.order[start..end] {
-            let b = bin_of(&centers[i as usize]);
-            bin_box[b].merge(&boxes[i as usize]);
+        for &i in order.iter() {
+            let b = bin_of(&self.centers[i as usize]);
+            bin_box[b].merge(&self.boxes[i as usize]);
             bin_n[b] += 1;
         }
         // Sweep from the right for suffix areas, then from the left for the best plane.
@@ -250,18 +274,18 @@ impl<const D: usize> Bvh<D> {
             return None;
         }
         // In-place partition: bins 0..=best go left.
-        let slice = &mut self.order[start..end];
+        let slice = order;
         let mut i = 0;
         let mut j = slice.len();
         while i < j {
-            if bin_of(&centers[slice[i] as usize]) <= best {
+            if bin_of(&self.centers[slice[i] as usize]) <= best {
                 i += 1;
             } else {
                 j -= 1;
                 slice.swap(i, j);
             }
         }
-        Some(start + i)
+        Some(i)
     }
 }
 

@@ -51,6 +51,9 @@ struct Expansion {
     m: [[f64; 3]; 3],
     /// `C_i,jk` with `jk` in the order xx, yy, zz, xy, xz, yz (C is symmetric in j, k).
     c: [[f64; 6]; 3],
+    /// Total area and sum of triangle centroids (to merge children into their parent).
+    area: f64,
+    csum: P3,
 }
 
 impl Expansion {
@@ -138,20 +141,32 @@ impl FastWinding {
         }
         let boundary = Boundary::<3>::with_leaf_size(v, f, WINDING_LEAF)?;
         let b = &boundary;
-        let exp = b
-            .bvh
-            .nodes
+        let nodes = &b.bvh.nodes;
+        // Leaves from their triangles (in parallel), inner nodes bottom-up by shifting their
+        // children's moments (children come after their parent in the flat array): O(#F)
+        // instead of O(#F log #F) for summing every subtree's triangles again.
+        let mut exp: Vec<Option<Expansion>> = nodes
             .par_iter()
             .map(|node| {
-                let s = node.start as usize;
-                expansion(
-                    b,
-                    &b.bvh.order[s..s + node.count as usize],
-                    &node.bbox,
-                    beta,
-                )
+                node.is_leaf().then(|| {
+                    let s = node.start as usize;
+                    expansion(
+                        b,
+                        &b.bvh.order[s..s + node.count as usize],
+                        &node.bbox,
+                        beta,
+                    )
+                })
             })
             .collect();
+        for i in (0..nodes.len()).rev() {
+            if !nodes[i].is_leaf() {
+                let l = exp[i + 1].expect("child computed before parent");
+                let r = exp[nodes[i].right as usize].expect("child computed before parent");
+                exp[i] = Some(merge(&l, &r, &nodes[i].bbox, nodes[i].count, beta));
+            }
+        }
+        let exp = exp.into_iter().map(|e| e.expect("every node")).collect();
         Ok(FastWinding { boundary, exp })
     }
 
@@ -248,9 +263,21 @@ fn expansion(b: &Boundary<3>, tris: &[u32], bbox: &Aabb<3>, beta: f64) -> Expans
             }
         }
     }
-    // Radius: farthest corner of the node's box from the centre (as libigl's UT_SolidAngle).
-    // The farthest vertex would be tighter, but the box radius also bounds how far the
-    // triangles spread sideways, and at beta = 2 it halves the worst-case error for ~20% time.
+    Expansion {
+        center,
+        reach2: reach2(&center, bbox, beta),
+        n,
+        m,
+        c,
+        area,
+        csum: mc,
+    }
+}
+
+/// `(beta R)^2` with `R` the farthest corner of the node's box from the centre (as libigl's
+/// UT_SolidAngle). The farthest vertex would be tighter, but the box radius also bounds how far
+/// the triangles spread sideways, and at beta = 2 it halves the worst-case error for ~20% time.
+fn reach2(center: &P3, bbox: &Aabb<3>, beta: f64) -> f64 {
     let r2: f64 = (0..3)
         .map(|k| {
             let d = (center[k] - bbox.lo[k])
@@ -259,12 +286,49 @@ fn expansion(b: &Boundary<3>, tris: &[u32], bbox: &Aabb<3>, beta: f64) -> Expans
             d * d
         })
         .sum();
+    beta * beta * r2
+}
+
+/// Parent expansion from its two children: moments move to the new centre `c` with
+/// `y' = y + d`, `d = c_child - c`:
+///   M'_ij = M_ij + N_i d_j,   C'_ijk = C_ijk + M_ij d_k + M_ik d_j + N_i d_j d_k.
+fn merge(l: &Expansion, r: &Expansion, bbox: &Aabb<3>, count: u32, beta: f64) -> Expansion {
+    let area = l.area + r.area;
+    let csum = add(&l.csum, &r.csum);
+    let center = if area > 0.0 {
+        scale(
+            &add(&scale(&l.center, l.area), &scale(&r.center, r.area)),
+            1.0 / area,
+        )
+    } else {
+        // Every triangle degenerate: mean of the centroids, as in `expansion`.
+        scale(&csum, 1.0 / count as f64)
+    };
+    let mut n = [0.0; 3];
+    let mut m = [[0.0; 3]; 3];
+    let mut c = [[0.0; 6]; 3];
+    const JK: [(usize, usize); 6] = [(0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)];
+    for ch in [l, r] {
+        let d = sub(&ch.center, &center);
+        for i in 0..3 {
+            n[i] += ch.n[i];
+            for j in 0..3 {
+                m[i][j] += ch.m[i][j] + ch.n[i] * d[j];
+            }
+            for (jk, &(j, k)) in JK.iter().enumerate() {
+                c[i][jk] +=
+                    ch.c[i][jk] + ch.m[i][j] * d[k] + ch.m[i][k] * d[j] + ch.n[i] * d[j] * d[k];
+            }
+        }
+    }
     Expansion {
         center,
-        reach2: beta * beta * r2,
+        reach2: reach2(&center, bbox, beta),
         n,
         m,
         c,
+        area,
+        csum,
     }
 }
 
@@ -397,6 +461,22 @@ mod tests {
         let a = fw.exp[0].eval(&q);
         // Third-order truncation: relative error ~ (R / d)^3 ~ 1e-2 at d / R ~ 5.
         assert!((a - e).abs() < 1e-3 * e.abs().max(1e-3), "{a} vs {e}");
+    }
+
+    #[test]
+    fn merged_expansions_equal_direct_sums() {
+        let (v, f) = sphere(30, 15);
+        let fw = FastWinding::new(v.view(), f.view(), 2.0).unwrap();
+        let b = fw.boundary();
+        for (node, e) in b.bvh.nodes.iter().zip(&fw.exp) {
+            let s = node.start as usize;
+            let d = expansion(b, &b.bvh.order[s..s + node.count as usize], &node.bbox, 2.0);
+            let close = |x: f64, y: f64| (x - y).abs() < 1e-12;
+            assert!((0..3).all(|k| close(e.center[k], d.center[k]) && close(e.n[k], d.n[k])));
+            assert!((0..3).all(|i| (0..3).all(|j| close(e.m[i][j], d.m[i][j]))));
+            assert!((0..3).all(|i| (0..6).all(|j| close(e.c[i][j], d.c[i][j]))));
+            assert!(close(e.reach2, d.reach2));
+        }
     }
 
     #[test]
