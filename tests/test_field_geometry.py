@@ -177,11 +177,26 @@ def test_winding_number_exact_with_infinite_beta(data_dir):
 def test_winding_number_2d_polygon_with_holes(data_dir):
     V, E = _read_dat(data_dir / "polygons-2d" / "dude.dat")
     Q = _box_points(V, 2000, np.random.default_rng(2))
-    w = skinrs.winding_number(V, E, Q)
-    np.testing.assert_allclose(w, igl.winding_number(V, E, Q), atol=1e-10)
+    w_ref = igl.winding_number(V, E, Q)
+    w = skinrs.winding_number(V, E, Q, beta=np.inf)
+    np.testing.assert_allclose(w, w_ref, rtol=0, atol=1e-10)
     # The outer ring is clockwise: -1 inside, 0 outside and in the holes.
     assert np.all(np.minimum(np.abs(w), np.abs(w + 1)) < 1e-10)
     assert 100 < np.sum(w < -0.5) < 1900
+    # Hierarchical with the 2D default beta = 4.
+    err = np.abs(skinrs.winding_number(V, E, Q) - w_ref)
+    assert err.max() < 2e-3 and np.median(err) < 3e-4
+    # beta = 2 in 2D: the 1/d kernel makes it ~1e-2 at worst.
+    assert np.abs(skinrs.winding_number(V, E, Q, beta=2) - w_ref).max() < 2e-2
+
+
+def test_winding_number_2d_large_outline(data_dir):
+    V, E = _read_dat(data_dir / "polygons-2d" / "nazca_monkey.dat")
+    Q = _box_points(V, 2000, np.random.default_rng(12))
+    w_ref = igl.winding_number(V, E, Q)
+    err = np.abs(skinrs.winding_number(V, E, Q) - w_ref)
+    assert err.max() < 3e-3 and np.median(err) < 5e-4
+    np.testing.assert_allclose(skinrs.winding_number(V, E, Q, beta=np.inf), w_ref, atol=1e-10)
 
 
 def test_winding_number_orientation_and_soup_of_one_triangle():

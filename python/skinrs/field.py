@@ -5,8 +5,8 @@ segments in 2D (``V`` (n, 2), ``F`` (m, 2)); it need not be closed, manifold or 
 connected. Normals follow libigl: outward for counter-clockwise triangles seen from outside and
 for counter-clockwise outer polygons in 2D.
 
-* :func:`winding_number`: generalized winding number, fast hierarchical in 3D (Barill et al.
-  2018), exact in 2D; 1 inside, 0 outside, in between for open shapes.
+* :func:`winding_number`: generalized winding number, hierarchical (Barill et al. 2018) in 2D
+  and 3D; 1 inside, 0 outside, in between for open shapes.
 * :func:`segment_visible`: the visibility indicator of the kernel ``k_RT`` (eq. 4).
 * :func:`closest_point`: closest boundary point, its primitive and normal (eq. 9).
 * :func:`knn_distance`: distance to the k-th nearest neighbour (``sigma`` heuristic).
@@ -33,7 +33,7 @@ def _queries(Q, d: int, name: str) -> np.ndarray:
     return Q
 
 
-def winding_number(V, F, Q, beta=2.0):
+def winding_number(V, F, Q, beta=None):
     """Generalized winding number of a boundary at query points.
 
     Parameters
@@ -45,16 +45,21 @@ def winding_number(V, F, Q, beta=2.0):
         contribute nothing.
     Q : (nq, d) float array
         Query points, same dimension as ``V``.
-    beta : float
-        Accuracy of the 3D far-field expansion (Barill et al. 2018): a tree node is replaced by
-        its order-2 expansion for queries farther than ``beta`` times its radius. Larger is more
-        accurate and slower; ``np.inf`` is the exact sum. Ignored in 2D (always exact).
+    beta : float, optional
+        Accuracy of the far-field expansion (Barill et al. 2018): a tree node is replaced by its
+        order-2 expansion for queries farther than ``beta`` times its radius. Larger is more
+        accurate and slower; ``np.inf`` gives the exact sum. Default: 2 in 3D (Barill et al.'s
+        and libigl's choice), 4 in 2D, where the angle kernel decays only like ``1/d`` and
+        ``beta=2`` would be ~10x less accurate than in 3D.
 
     Returns
     -------
     w : (nq,) float array
-        1 inside a closed outward-oriented shape, 0 outside (``igl.winding_number``'s
-        convention); about 1e-4 from the exact value with ``beta=2`` away from the surface.
+        1 inside a closed outward-oriented shape (counter-clockwise polygon in 2D), 0 outside,
+        as ``igl.winding_number``. With the default ``beta`` the largest deviation from the
+        exact value, reached next to the boundary, is a few 1e-3 (in 3D like
+        ``igl.fast_winding_number``), the median a few 1e-4; ``beta=3`` brings the 3D maximum
+        under 1e-3.
 
     Examples
     --------
@@ -67,6 +72,8 @@ def winding_number(V, F, Q, beta=2.0):
     """
     V, F = _boundary(V, F)
     Q = _queries(Q, V.shape[1], "Q")
+    if beta is None:
+        beta = 2.0 if V.shape[1] == 3 else 4.0
     try:
         beta = float(beta)
     except (TypeError, ValueError):

@@ -6,8 +6,8 @@
 //!   segments in 2D) answering the visibility test of the kernel `k_RT` (eq. 4: does the segment
 //!   `x -> x_i` cross the boundary?) and closest-point queries with the primitive's normal (the
 //!   zero-Neumann reparameterisation, eq. 9).
-//! * [`winding`]: generalized winding numbers (Jacobson et al. 2013), accelerated in 3D with the
-//!   tree expansion of Barill et al. 2018; used to reject samples outside the shape and to weight
+//! * [`winding`]: generalized winding numbers (Jacobson et al. 2013), accelerated with the tree
+//!   expansion of Barill et al. 2018; used to reject samples outside the shape and to weight
 //!   the energy (eq. 11). Works on open meshes and triangle soups.
 //! * [`grid`]: a uniform hash grid over points for radius queries (the truncated kernel,
 //!   `r = 3 sigma`) and k nearest neighbours (`sigma` = median distance to the 9th neighbour).

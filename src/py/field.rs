@@ -36,9 +36,9 @@ fn _winding_number<'py>(
     let w = py
         .detach(|| -> SkinResult<Vec<f64>> {
             if d == 3 {
-                FastWinding::new(vv, ff.view(), beta)?.eval_batch(qq)
+                FastWinding::<3>::new(vv, ff.view(), beta)?.eval_batch(qq)
             } else {
-                field::winding_number_2d(vv, ff.view(), qq)
+                FastWinding::<2>::new(vv, ff.view(), beta)?.eval_batch(qq)
             }
         })
         .map_err(to_pyerr)?;
