@@ -13,10 +13,12 @@
 //! kernel at `r = 3 sigma` with `sigma` about the 9th-neighbour spacing, so every radius query
 //! touches a bounded number of cells of that size, and a grid answers it with no traversal.
 //! Only occupied cells are stored (a hash map), so shapes with large empty bounding boxes
-//! (thin limbs, surfaces sampled in 3D) cost memory proportional to the points, not the box.
+//! (thin limbs, surfaces sampled in 3D) cost memory proportional to the points, not the box;
+//! when the occupied box has at most ~4 cells per point a dense array replaces the hash map.
 //! Points are sorted by cell so each cell is a contiguous range of `order`.
 
 use std::collections::HashMap;
+use std::hash::{BuildHasherDefault, Hasher};
 
 use ndarray::ArrayView2;
 use rayon::prelude::*;
@@ -25,13 +27,55 @@ use super::{norm2, row, sub};
 use crate::error::SkinResult;
 use crate::invalid;
 
+/// Multiplicative hash for integer cell keys. The default SipHash is built to resist
+/// adversarial keys, which cell coordinates are not, and costs more than the distance tests a
+/// lookup guards; this one (the Fx hash of rustc) is a rotate, xor and multiply per word.
+#[derive(Default, Clone, Copy)]
+pub struct CellHasher(u64);
+
+impl Hasher for CellHasher {
+    #[inline]
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.write_u64(b as u64);
+        }
+    }
+
+    #[inline]
+    fn write_u64(&mut self, x: u64) {
+        self.0 = (self.0.rotate_left(5) ^ x).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
+    }
+
+    #[inline]
+    fn write_i64(&mut self, x: i64) {
+        self.write_u64(x as u64);
+    }
+
+    #[inline]
+    fn write_usize(&mut self, x: usize) {
+        self.write_u64(x as u64);
+    }
+
+    #[inline]
+    fn finish(&self) -> u64 {
+        self.0
+    }
+}
+
+type CellMap<const D: usize> = HashMap<[i64; D], (u32, u32), BuildHasherDefault<CellHasher>>;
+
 #[derive(Clone, Debug)]
 pub struct HashGrid<const D: usize> {
     points: Vec<[f64; D]>,
     origin: [f64; D],
     cell: f64,
     /// Cell key -> range of `order`.
-    cells: HashMap<[i64; D], (u32, u32)>,
+    cells: CellMap<D>,
+    /// The same ranges as a dense array over the occupied key box, when that box has at most a
+    /// few cells per point (then `cells` is left empty): an index computation instead of a
+    /// hash lookup, which matters because searches mostly visit empty or nearly empty cells.
+    dense: Option<Vec<(u32, u32)>>,
+    strides: [usize; D],
     order: Vec<u32>,
     /// Smallest and largest occupied cell key per axis (bounds the kNN ring search).
     key_lo: [i64; D],
@@ -69,7 +113,7 @@ impl<const D: usize> HashGrid<D> {
         let keys: Vec<[i64; D]> = points.iter().map(key).collect();
         let mut order: Vec<u32> = (0..points.len() as u32).collect();
         order.sort_unstable_by(|&a, &b| keys[a as usize].cmp(&keys[b as usize]));
-        let mut cells = HashMap::new();
+        let mut cells = CellMap::<D>::default();
         let (mut key_lo, mut key_hi) = ([i64::MAX; D], [i64::MIN; D]);
         let mut s = 0;
         while s < order.len() {
@@ -85,11 +129,33 @@ impl<const D: usize> HashGrid<D> {
             }
             s = e;
         }
+        let mut strides = [0usize; D];
+        let mut total: Option<usize> = Some(1);
+        for a in (0..D).rev() {
+            strides[a] = total.unwrap_or(0);
+            let span = usize::try_from(key_hi[a] - key_lo[a] + 1).ok();
+            total = total.zip(span).and_then(|(t, w)| t.checked_mul(w));
+        }
+        let dense = match total {
+            Some(t) if t <= 4 * points.len() + 4096 => {
+                let mut d = vec![(0u32, 0u32); t];
+                for (k, r) in cells.drain() {
+                    let idx: usize = (0..D)
+                        .map(|a| (k[a] - key_lo[a]) as usize * strides[a])
+                        .sum();
+                    d[idx] = r;
+                }
+                Some(d)
+            }
+            _ => None,
+        };
         Ok(HashGrid {
             points,
             origin,
             cell,
             cells,
+            dense,
+            strides,
             order,
             key_lo,
             key_hi,
@@ -130,6 +196,25 @@ impl<const D: usize> HashGrid<D> {
         self.points.is_empty()
     }
 
+    /// Range of `order` holding the points of cell `key`, if any.
+    #[inline]
+    fn cell_range(&self, key: &[i64; D]) -> Option<(u32, u32)> {
+        match &self.dense {
+            Some(d) => {
+                let mut idx = 0;
+                for (a, &k) in key.iter().enumerate() {
+                    if k < self.key_lo[a] || k > self.key_hi[a] {
+                        return None;
+                    }
+                    idx += (k - self.key_lo[a]) as usize * self.strides[a];
+                }
+                let r = d[idx];
+                (r.0 < r.1).then_some(r)
+            }
+            None => self.cells.get(key).copied(),
+        }
+    }
+
     fn key(&self, p: &[f64; D]) -> [i64; D] {
         std::array::from_fn(|k| ((p[k] - self.origin[k]) / self.cell).floor() as i64)
     }
@@ -148,7 +233,7 @@ impl<const D: usize> HashGrid<D> {
         }
         let mut c = lo;
         loop {
-            if let Some(&(s, e)) = self.cells.get(&c) {
+            if let Some((s, e)) = self.cell_range(&c) {
                 for &i in &self.order[s as usize..e as usize] {
                     visit(i, norm2(&sub(&self.points[i as usize], q)));
                 }
@@ -189,8 +274,8 @@ impl<const D: usize> HashGrid<D> {
         let skip = skip.map(|s| s as u32);
         let c = self.key(q);
         // Rings of cells at Chebyshev distance s around q's cell. Every point not yet seen lies
-        // at least s * cell away (q is inside the centre cell), so stop once the k-th best
-        // distance is within that.
+        // outside the cube of searched cells, so stop once the k-th best distance is within the
+        // distance from q to that cube's boundary (at least s * cell).
         let max_ring = (0..D)
             .map(|a| (c[a] - self.key_lo[a]).max(self.key_hi[a] - c[a]).max(0))
             .max()
@@ -216,7 +301,13 @@ impl<const D: usize> HashGrid<D> {
                 break;
             }
             if best.len() == k {
-                let reach = s as f64 * self.cell;
+                // Distance from q to the outside of the cube of cells searched so far.
+                let mut reach = f64::INFINITY;
+                for a in 0..D {
+                    let lo = self.origin[a] + (c[a] - s) as f64 * self.cell;
+                    let hi = self.origin[a] + (c[a] + s + 1) as f64 * self.cell;
+                    reach = reach.min(q[a] - lo).min(hi - q[a]);
+                }
                 if best[k - 1].0 <= reach * reach {
                     break;
                 }
@@ -236,7 +327,7 @@ impl<const D: usize> HashGrid<D> {
         loop {
             let on_ring = (0..D).any(|k| x[k] == lo[k] || x[k] == hi[k]);
             if on_ring {
-                if let Some(&(a, b)) = self.cells.get(&x) {
+                if let Some((a, b)) = self.cell_range(&x) {
                     for &i in &self.order[a as usize..b as usize] {
                         visit(i);
                     }
@@ -282,8 +373,10 @@ impl<const D: usize> HashGrid<D> {
 /// Coincident points count (distance 0). Needs `1 <= k < #X`.
 pub fn knn_distance(x: ArrayView2<f64>, k: usize) -> SkinResult<Vec<f64>> {
     match x.ncols() {
-        2 => HashGrid::<2>::auto(x, k as f64)?.knn_distance_self(k),
-        3 => HashGrid::<3>::auto(x, k as f64)?.knn_distance_self(k),
+        // About k / 2 points per cell: the k-th neighbour then usually lies within one ring of
+        // cells, and a ring visits half the points it would with k per cell.
+        2 => HashGrid::<2>::auto(x, 0.5 * k as f64)?.knn_distance_self(k),
+        3 => HashGrid::<3>::auto(x, 0.5 * k as f64)?.knn_distance_self(k),
         c => invalid!("X must have 2 or 3 columns, got {c}"),
     }
 }
@@ -307,12 +400,10 @@ mod tests {
         })
     }
 
-    #[test]
-    fn radius_and_knn_match_brute_force() {
-        let x = cloud(500, 7);
-        let g = HashGrid::<3>::auto(x.view(), 3.0).unwrap();
-        let pts: Vec<[f64; 3]> = (0..500).map(|i| row(&x.view(), i)).collect();
-        for qi in [0usize, 17, 123, 499] {
+    fn check_against_brute_force(x: &ndarray::Array2<f64>, g: &HashGrid<3>, r: f64) {
+        let n = x.nrows();
+        let pts: Vec<[f64; 3]> = (0..n).map(|i| row(&x.view(), i)).collect();
+        for qi in [0usize, 17, 123, n - 1] {
             let q = pts[qi];
             let mut d: Vec<(f64, usize)> = pts
                 .iter()
@@ -327,16 +418,35 @@ mod tests {
                 assert_eq!(a.1, b.1);
                 assert!((a.0 - b.0).abs() < 1e-15);
             }
-            let r = 0.12;
             let mut got = Vec::new();
             g.radius(&q, r, &mut got);
             got.sort();
-            let mut want: Vec<usize> = (0..500)
+            let want: Vec<usize> = (0..n)
                 .filter(|&i| norm2(&sub(&pts[i], &q)) <= r * r)
                 .collect();
-            want.sort();
             assert_eq!(got, want);
         }
+    }
+
+    #[test]
+    fn radius_and_knn_match_brute_force() {
+        // Dense cell array.
+        let x = cloud(500, 7);
+        let g = HashGrid::<3>::auto(x.view(), 3.0).unwrap();
+        assert!(g.dense.is_some());
+        check_against_brute_force(&x, &g, 0.12);
+        // Two clusters far apart: the occupied key box is huge, so the hash map is used.
+        let mut y = cloud(400, 11);
+        for i in 200..400 {
+            for k in 0..3 {
+                y[[i, k]] += 1000.0;
+            }
+        }
+        let g = HashGrid::<3>::new(y.view(), 0.05).unwrap();
+        assert!(g.dense.is_none());
+        check_against_brute_force(&y, &g, 0.12);
+        let g = HashGrid::<3>::auto(y.view(), 4.0).unwrap();
+        check_against_brute_force(&y, &g, 30.0);
         let kd = knn_distance(x.view(), 9).unwrap();
         assert_eq!(kd.len(), 500);
         assert!(kd.iter().all(|&v| v > 0.0));
