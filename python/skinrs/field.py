@@ -132,7 +132,7 @@ def closest_point(V, F, Q):
     point : (nq, d) float array
         The closest point.
     face : (nq,) int64 array
-        Row of ``F`` holding it (on exact ties, one of the tied rows).
+        Row of ``F`` holding it (on exact ties, the lowest tied row).
     normal : (nq, d) float array
         Unit normal of that element: ``(b - a) x (c - a)`` normalised for triangles, the segment
         direction turned clockwise by 90 degrees in 2D; zero for degenerate elements.

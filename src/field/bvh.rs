@@ -294,7 +294,7 @@ impl<const D: usize> Builder<'_, D> {
 pub struct Closest<const D: usize> {
     pub dist: f64,
     pub point: [f64; D],
-    /// Row of `f` holding the closest point (the lowest such row on exact ties within a leaf).
+    /// Row of `f` holding the closest point (the lowest such row on exact ties).
     pub prim: usize,
     /// Unit normal of that primitive: `(b - a) x (c - a)` normalised for triangles, `(b - a)`
     /// turned clockwise by 90 degrees for segments (outward for a counter-clockwise polygon);
