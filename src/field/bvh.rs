@@ -13,8 +13,9 @@
 //! binned surface-area heuristic: boundary meshes are very non-uniform (long thin triangles,
 //! dense details next to big flat faces) and SAH keeps both segment and nearest queries close to
 //! logarithmic on them, where a median split wastes work on nearly empty boxes. Every subtree
-//! owns a contiguous range of the primitive permutation, so per-node aggregates (the winding
-//! number expansions of [`super::winding`]) can be computed node by node in parallel.
+//! owns a contiguous range of the primitive permutation, and children follow their parent in
+//! the array, so per-node aggregates (the winding-number expansions of [`super::winding`]) are
+//! computed per leaf in parallel and merged bottom-up. Large subtrees are built on two threads.
 //!
 //! Degenerate primitives (zero area or length, repeated vertices) are allowed, as soups have
 //! them: they are never hit, and closest-point queries still return a point on them (their
@@ -334,6 +335,9 @@ impl<const D: usize> Boundary<D> {
         }
         if f.nrows() == 0 {
             return invalid!("the boundary has no elements (F is empty)");
+        }
+        if f.nrows() >= u32::MAX as usize {
+            return invalid!("too many elements ({}); the tree indexes them with u32", f.nrows());
         }
         let nv = v.nrows();
         let verts: Vec<[f64; D]> = (0..nv).map(|i| row(&v, i)).collect();
