@@ -337,7 +337,10 @@ impl<const D: usize> Boundary<D> {
             return invalid!("the boundary has no elements (F is empty)");
         }
         if f.nrows() >= u32::MAX as usize {
-            return invalid!("too many elements ({}); the tree indexes them with u32", f.nrows());
+            return invalid!(
+                "too many elements ({}); the tree indexes them with u32",
+                f.nrows()
+            );
         }
         let nv = v.nrows();
         let verts: Vec<[f64; D]> = (0..nv).map(|i| row(&v, i)).collect();
