@@ -7,6 +7,7 @@
 pub mod bbw;
 pub mod constraints;
 pub mod error;
+pub mod field;
 pub mod operators;
 pub mod progress;
 pub mod reduce;

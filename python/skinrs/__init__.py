@@ -6,8 +6,9 @@
 >>> W = skinrs.bbw_dual(V, T, C, BE=BE)               # doctest: +SKIP
 """
 
-from . import io
+from . import field, io
 from .bbw import bbw_dual, bbw_dual_constrained, biharmonic_energy, boundary_conditions
+from .field import closest_point, knn_distance, segment_visible, winding_number
 from .meshing import MeshingWarning, mesh_with_skeleton, skin_weights
 from .operators import biharmonic_matrix, connected_components, cotan_laplacian, massmatrix
 from .reduce import (
@@ -36,11 +37,14 @@ __all__ = [
     "biharmonic_matrix",
     "bone_parents",
     "boundary_conditions",
+    "closest_point",
     "connected_components",
     "cotan_laplacian",
     "dqs",
+    "field",
     "forward_kinematics",
     "io",
+    "knn_distance",
     "lbs",
     "massmatrix",
     "mesh_with_skeleton",
@@ -49,7 +53,9 @@ __all__ = [
     "random_skeleton_poses",
     "reduce_weights",
     "reduction_error",
+    "segment_visible",
     "skin_weights",
     "transform_normals",
     "unpack_weights",
+    "winding_number",
 ]

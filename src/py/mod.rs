@@ -13,6 +13,7 @@ use crate::progress::{Event, Progress};
 use crate::sparse::Csc;
 
 mod bbw;
+mod field;
 mod operators;
 mod reduce;
 mod skin;
@@ -118,5 +119,6 @@ fn _skinrs(m: &Bound<'_, PyModule>) -> PyResult<()> {
     bbw::register(m)?;
     skin::register(m)?;
     reduce::register(m)?;
+    field::register(m)?;
     Ok(())
 }

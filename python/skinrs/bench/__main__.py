@@ -3,7 +3,7 @@
 import importlib
 import sys
 
-NAMES = ("bbw", "lbs", "reduce")
+NAMES = ("bbw", "field", "lbs", "reduce")
 
 
 def main(argv=None) -> int:
