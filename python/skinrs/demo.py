@@ -24,7 +24,8 @@ def main(argv=None) -> int:
     W, info = bbw_dual(V, T, C, BE=BE, tol=args.tol, return_info=True, verbose=True)
     dt = time.perf_counter() - t0
     print(
-        f"bbw_dual: {dt:.2f} s ({info['iterations']} iterations), energy {info['energy']:.10g}, "
+        f"bbw_dual ({info['solver']}): {dt:.2f} s ({info['iterations']} L-BFGS iterations, "
+        f"{info['rounds']} active-set rounds), energy {info['energy']:.10g}, "
         f"certified within {info['relative_gap']:.1e} of the optimum; "
         f"W in [{W.min():.3g}, {W.max():.3g}], rows sum to 1 within "
         f"{np.abs(W.sum(1) - 1).max():.1e}"

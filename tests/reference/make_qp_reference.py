@@ -245,18 +245,22 @@ def polish(B, b, bc, W0, Y0, max_rounds=30):
         if not neg_w.any() and not neg_y.any():
             break
         S = (S & ~neg_w) | neg_y
-    ok = not neg_w.any() and not neg_y.any()
     Wf[~S] = 0.0
-    info = {
-        "converged": bool(ok),
-        "rounds": rnd + 1,
-        "time": time.perf_counter() - t0,
+    info = _polish_report(S, Wf, Y, neg_w, neg_y, rnd + 1, time.perf_counter() - t0, history)
+    return assemble(Wf, b, bc, B.shape[0]), v, info
+
+
+def _polish_report(S, Wf, Y, neg_w, neg_y, rounds, seconds, history):
+    """What a polish records: converged = no KKT sign violated on the final support S."""
+    return {
+        "converged": bool(not neg_w.any() and not neg_y.any()),
+        "rounds": rounds,
+        "time": seconds,
         "history": history,
         "stationarity": float(np.abs(Y[S]).max()),
         "min_y_off_support": float(Y[~S].min()) if (~S).any() else 0.0,
         "min_w": float(Wf.min()),
     }
-    return assemble(Wf, b, bc, B.shape[0]), v, info
 
 
 def polish_schur(B, b, bc, W0, max_rounds=400, log=print):
@@ -320,18 +324,9 @@ def polish_schur(B, b, bc, W0, max_rounds=400, log=print):
         if not neg_w.any() and not neg_y.any():
             break
         S = (S & ~neg_w) | neg_y
-    ok = not neg_w.any() and not neg_y.any()
     Wf[~S] = 0.0
-    info = {
-        "method": "polish_schur (SciPy SuperLU per column + CG on the PoU multiplier)",
-        "converged": bool(ok),
-        "rounds": rnd + 1,
-        "time": time.perf_counter() - t0,
-        "history": history,
-        "stationarity": float(np.abs(Y[S]).max()),
-        "min_y_off_support": float(Y[~S].min()) if (~S).any() else 0.0,
-        "min_w": float(Wf.min()),
-    }
+    info = _polish_report(S, Wf, Y, neg_w, neg_y, rnd + 1, time.perf_counter() - t0, history)
+    info["method"] = "polish_schur (SciPy SuperLU per column + CG on the PoU multiplier)"
     return assemble(Wf, b, bc, B.shape[0]), -v, info
 
 
