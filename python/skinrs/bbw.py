@@ -129,7 +129,10 @@ def bbw_dual_constrained(
         Lumped mass in ``B = L^T M^-1 L``. The paper uses Voronoi; libigl's ``bbw`` uses its
         default, which is barycentric for tets.
     solver : str
-        ``"lbfgs-squared"``: the paper's L-BFGS on ``Y = U o U`` (Sec. 6, 8).
+        ``"active-set"`` (default): a short L-BFGS run guesses the supports, then a primal-dual
+        active set solves the problem on them exactly (one Cholesky per column support, CG on
+        the partition-of-unity multiplier) and swaps KKT violators. ``"lbfgs-squared"``: the
+        paper's L-BFGS on ``Y = U o U`` (Sec. 6, 8).
     tol : float
         Stop when the duality gap is at most ``tol`` times the energy: the returned energy is then
         certified within ``tol`` (relative) of the optimum.
@@ -142,7 +145,9 @@ def bbw_dual_constrained(
     verbose : bool
         Print progress (gap per iteration, throttled) and a summary to stderr.
     callback : callable, optional
-        ``callback(stage, iteration, value)`` is called about every 0.1 s with the relative gap;
+        ``callback(stage, iteration, value)`` is called about every 0.1 s with the relative gap
+        (stages ``"dual"``, ``"active-set"``) or the partition-of-unity residual of the inner
+        conjugate gradients (``"active-set cg"``);
         returning ``False`` stops the solve (raises ``KeyboardInterrupt``). Ctrl-C also stops it.
     return_info : bool
         Also return a dict of diagnostics: iterations, energy, lower_bound, gap, relative_gap,
@@ -274,7 +279,8 @@ def _progress_callback(verbose, callback):
         now = time.perf_counter()
         if now - last[0] > 1.0:
             last[0] = now
-            print(f"  {stage} iteration {iteration}: relative gap {value:.2e}", file=sys.stderr)
+            what = "partition-of-unity residual" if stage.endswith("cg") else "relative gap"
+            print(f"  {stage} iteration {iteration}: {what} {value:.2e}", file=sys.stderr)
         return None if callback is None else callback(stage, iteration, value)
 
     return cb
