@@ -8,12 +8,11 @@ same distances (to 1e-12).
 
 from __future__ import annotations
 
+import igl  # libigl is a test dependency (Makefile); a missing one must fail, not skip
 import numpy as np
 import pytest
 import skinrs
 from skinrs import io
-
-igl = pytest.importorskip("igl")
 
 MESHES = {
     "closed": "arm/arm.obj",
