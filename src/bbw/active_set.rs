@@ -32,14 +32,14 @@
 use std::time::Instant;
 
 use faer::linalg::solvers::Solve;
-use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
+use faer::sparse::linalg::solvers::Llt;
 use faer::sparse::Triplet;
-use faer::{MatMut, Side};
+use faer::MatMut;
 use rayon::prelude::*;
 
 use super::dual::{box_eval, dot, pou_eval, project_box, project_pou};
-use super::problem::EliminatedProblem;
-use super::solve::{run_lbfgs, BbwInfo, BbwOptions, Best};
+use super::problem::{cholesky, EliminatedProblem};
+use super::solve::{blocks, random_start, run_lbfgs, BbwInfo, BbwOptions, Best};
 use crate::error::{SkinError, SkinResult};
 use crate::progress::{Event, Progress};
 use crate::sparse::{from_triplets, Csc};
@@ -77,11 +77,9 @@ impl SupportFactor {
         }
         let k = idx.len();
         let sub = from_triplets(k, k, &trip)?;
-        let fail = |e: String| SkinError::Numerical(format!("Cholesky of a support block: {e}"));
-        let sym = SymbolicLlt::try_new(sub.symbolic(), Side::Lower)
-            .map_err(|e| fail(format!("{e:?}")))?;
-        let llt = Llt::try_new_with_symbolic(sym, sub.as_ref(), Side::Lower)
-            .map_err(|e| fail(format!("{e:?}")))?;
+        // A principal submatrix of the SPD `A` is SPD, so this fails only on round-off.
+        let llt = cholesky(&sub)
+            .map_err(|e| SkinError::Numerical(format!("Cholesky of a support block: {e}")))?;
         Ok(SupportFactor {
             idx,
             llt: Some(llt),
@@ -119,9 +117,8 @@ pub(crate) fn solve(
     progress: &mut dyn Progress,
 ) -> SkinResult<()> {
     let (nf, m) = (prob.nf(), prob.m);
-    let blocks = if opts.partition_of_unity { 1 } else { 2 };
     let t = Instant::now();
-    let start = super::solve::random_start(nf, m, blocks, opts.seed);
+    let start = random_start(nf, m, blocks(opts), opts.seed);
     let warm = WARM_GAP.max(opts.tol);
     run_lbfgs(prob, opts, warm, start, best, info, progress)?;
     info.time_lbfgs = t.elapsed().as_secs_f64();

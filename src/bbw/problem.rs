@@ -105,12 +105,9 @@ impl EliminatedProblem {
             }
         }
         let a = from_triplets(nf, nf, &trip)?;
-        let symbolic = SymbolicLlt::try_new(a.symbolic(), Side::Lower).map_err(|e| {
-            SkinError::Numerical(format!("symbolic Cholesky of B_ff failed: {e:?}"))
-        })?;
-        let llt = Llt::try_new_with_symbolic(symbolic, a.as_ref(), Side::Lower).map_err(|e| {
+        let llt = cholesky(&a).map_err(|e| {
             SkinError::Numerical(format!(
-                "B_ff is not positive definite ({e:?}); check for degenerate elements or a \
+                "B_ff is not positive definite ({e}); check for degenerate elements or a \
                  component without constrained vertices"
             ))
         })?;
@@ -204,6 +201,13 @@ impl EliminatedProblem {
         }
         w
     }
+}
+
+/// Sparse Cholesky factor of the SPD matrix `a` (its lower triangle is read), or why it failed.
+pub(crate) fn cholesky(a: &Csc) -> Result<Llt<usize, f64>, String> {
+    let symbolic = SymbolicLlt::try_new(a.symbolic(), Side::Lower)
+        .map_err(|e| format!("symbolic analysis: {e:?}"))?;
+    Llt::try_new_with_symbolic(symbolic, a.as_ref(), Side::Lower).map_err(|e| format!("{e:?}"))
 }
 
 /// Every connected component of the matrix graph must hold a constrained vertex, otherwise

@@ -157,7 +157,7 @@ pub fn bbw_dual(
 }
 
 /// Number of `nf x m` blocks of dual variables: `Y` with partition of unity, `(Y, U)` without.
-fn blocks(opts: &BbwOptions) -> usize {
+pub(crate) fn blocks(opts: &BbwOptions) -> usize {
     if opts.partition_of_unity {
         1
     } else {
@@ -166,7 +166,7 @@ fn blocks(opts: &BbwOptions) -> usize {
 }
 
 /// Projects recovered weights onto the primal feasible set of the variant being solved.
-pub(crate) fn project(opts: &BbwOptions, w: &[f64], nf: usize, m: usize) -> Vec<f64> {
+fn project(opts: &BbwOptions, w: &[f64], nf: usize, m: usize) -> Vec<f64> {
     if opts.partition_of_unity {
         project_pou(w, nf, m)
     } else {
@@ -185,7 +185,7 @@ pub(crate) fn run_lbfgs(
     best: &mut Best,
     info: &mut BbwInfo,
     progress: &mut dyn Progress,
-) -> SkinResult<Vec<f64>> {
+) -> SkinResult<()> {
     let (nf, m) = (prob.nf(), prob.m);
     let eval = |y: &[f64]| -> DualPoint {
         if opts.partition_of_unity {
@@ -244,7 +244,7 @@ pub(crate) fn run_lbfgs(
     }
     info.iterations += iterations;
     info.evaluations += evaluations;
-    Ok(u)
+    Ok(())
 }
 
 /// Best certified pair seen so far: the lowest feasible energy and the highest lower bound.
@@ -270,8 +270,7 @@ impl Best {
     }
     /// Records the dual point's lower bound and, if it is better, the projected primal.
     pub fn update(&mut self, dp: &DualPoint, feasible: Vec<f64>, upper: f64) {
-        self.lower = self.lower.max(dp.lower_bound);
-        self.dual_objective = dp.objective;
+        self.bound(dp);
         self.offer(&dp.w, feasible, upper);
     }
     /// Records the dual point's lower bound only.
