@@ -150,9 +150,11 @@ def bbw_dual_constrained(
         conjugate gradients (``"active-set cg"``);
         returning ``False`` stops the solve (raises ``KeyboardInterrupt``). Ctrl-C also stops it.
     return_info : bool
-        Also return a dict of diagnostics: iterations, energy, lower_bound, gap, relative_gap,
-        dual_objective, min_raw_weight, max_raw_weight, converged, time_factor, time_solve,
-        time_operators.
+        Also return a dict of diagnostics: solver, iterations and evaluations (L-BFGS),
+        rounds and cg_iterations (active set), energy, lower_bound, gap, relative_gap,
+        dual_objective, min_raw_weight, max_raw_weight, converged, and seconds per phase:
+        time_operators, time_factor, time_solve and within it time_lbfgs, time_active_set
+        (of which time_support_factor and time_cg).
 
     Returns
     -------

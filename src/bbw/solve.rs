@@ -102,6 +102,9 @@ pub struct BbwInfo {
     pub time_solve: f64,
     pub time_lbfgs: f64,
     pub time_active_set: f64,
+    /// Within the active-set phase: factoring the per-column support blocks, and CG on `mu`.
+    pub time_support_factor: f64,
+    pub time_cg: f64,
 }
 
 /// Solves BBW on an eliminated problem. Returns the full `n x m` weights (rows of `b` equal `bc`)

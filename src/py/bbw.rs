@@ -142,6 +142,8 @@ fn py_bbw_dual<'py>(
     d.set_item("time_solve", info.time_solve)?;
     d.set_item("time_lbfgs", info.time_lbfgs)?;
     d.set_item("time_active_set", info.time_active_set)?;
+    d.set_item("time_support_factor", info.time_support_factor)?;
+    d.set_item("time_cg", info.time_cg)?;
     Ok((w.into_pyarray(py), d))
 }
 
