@@ -436,8 +436,12 @@ def make(name, data_dir=None, skip_qp=False, seed="igl", log=print):
             # seed would only cost rounds. igl.bbw's seed needs 40+ rounds of ~40 s on big2d.
             import skinrs
 
-            W_i = skinrs.bbw_dual_constrained(V, T, b, bc, tol=1e-12, mass="voronoi")
-            seed_note = "skinrs.bbw_dual_constrained tol 1e-12 (support seed only)"
+            W_i, sinfo = skinrs.bbw_dual_constrained(
+                V, T, b, bc, tol=1e-9, mass="voronoi", return_info=True
+            )
+            seed_note = (
+                f"skinrs.bbw_dual_constrained tol 1e-9, {sinfo['rounds']} rounds (seed only)"
+            )
         else:
             import igl
 
