@@ -4,13 +4,13 @@
 //! - [`reduce_weights`]: the k-largest baseline, smooth (Sec. 3.1), geometric (3.2, eq. 3) and
 //!   Poisson (3.3, eq. 5) reductions for cages (control points) and skeletons (Sec. 4), solved by
 //!   the parallel local iteration of Sec. 3.1 ([`solver`]) with exact per-vertex QPs ([`qp`]).
-//! - [`deform_packed`], [`transform_normals`] (Sec. 5), [`deformation_errors`] (Sec. 6) and
-//!   [`forward_kinematics`] for example poses.
+//! - [`deform`] (the shared linear blend skinning over all example poses),
+//!   [`transform_normals`] (Sec. 5) and [`deformation_errors`] (Sec. 6).
 
 #![allow(clippy::needless_range_loop)] // index loops mirror the formulas
 
+mod coarse;
 mod deform;
-pub(crate) mod laplacian;
 pub(crate) mod qp;
 mod solver;
 
@@ -19,12 +19,11 @@ use rayon::prelude::*;
 
 use crate::error::SkinResult;
 use crate::invalid;
+use crate::operators::{self, MassKind};
 use crate::progress::Progress;
 
-pub use deform::{
-    deform_packed, deformation_errors, forward_kinematics, transform_normals, vertex_normals,
-    DeformationErrors, Poses,
-};
+pub use deform::{deform, deformation_errors, transform_normals, DeformationErrors, Poses};
+pub use solver::Solver;
 use solver::{Basis, Coupling, LinearPrecision, Problem, SolveOptions};
 
 /// Which weights to keep and how to set them.
@@ -86,12 +85,15 @@ pub struct ReduceOptions<'a> {
     pub rest_control_points: Option<ArrayView2<'a, f64>>,
     /// Upper bound on the sweeps of the local iteration.
     pub max_sweeps: usize,
-    /// Stop when a sweep lowers the objective by less than `tol` times its value.
+    /// Stop when the mean decrease of the objective over the last (up to 4) sweeps is at most
+    /// `tol` times its decrease since the start (see `solver::should_stop`).
     pub tol: f64,
     /// Over-relaxation factor of each block step, in (0, 2); 1 is plain block Gauss-Seidel.
     pub relaxation: f64,
     /// Energy of the smooth and Poisson methods.
     pub energy: Energy,
+    /// Iteration for coupled problems (smooth, Poisson).
+    pub solver: Solver,
 }
 
 impl Default for ReduceOptions<'_> {
@@ -103,6 +105,7 @@ impl Default for ReduceOptions<'_> {
             tol: 1e-4,
             relaxation: 1.9,
             energy: Energy::Gradient,
+            solver: Solver::Auto,
         }
     }
 }
@@ -178,6 +181,35 @@ fn check_weights(w: ArrayView2<f64>, k: usize, method: Method) -> SkinResult<()>
     Ok(())
 }
 
+/// What the Laplacian methods need of `F (t, 3)` beyond [`operators::check_elements`]:
+/// triangles, no repeated vertex in a triangle, every vertex used by some triangle (a vertex
+/// off the surface would have an empty Laplacian row and an undetermined weight).
+fn check_surface(n: usize, f: ArrayView2<usize>) -> SkinResult<()> {
+    if f.ncols() != 3 || f.nrows() == 0 {
+        return invalid!("F must hold at least one triangle (t, 3), got shape {:?}", f.dim());
+    }
+    let mut used = vec![false; n];
+    for (t, tri) in f.rows().into_iter().enumerate() {
+        let (i, j, k) = (tri[0], tri[1], tri[2]);
+        if i >= n || j >= n || k >= n {
+            return invalid!("F row {t} holds an index outside 0..{n}");
+        }
+        if i == j || j == k || i == k {
+            return invalid!("F row {t} repeats a vertex: [{i}, {j}, {k}]");
+        }
+        used[i] = true;
+        used[j] = true;
+        used[k] = true;
+    }
+    if let Some(u) = used.iter().position(|&x| !x) {
+        return invalid!(
+            "V row {u} is not used by any triangle of F; the Laplacian-based methods need every \
+             vertex on the surface (drop unreferenced vertices and reindex F)"
+        );
+    }
+    Ok(())
+}
+
 fn need<T>(x: Option<T>, what: &str, method: Method) -> SkinResult<T> {
     match x {
         Some(x) => Ok(x),
@@ -212,7 +244,15 @@ pub fn reduce_weights<'a>(
     opts: &ReduceOptions<'a>,
     progress: &mut dyn Progress,
 ) -> SkinResult<Reduction> {
+    let clock = std::time::Instant::now();
+    let debug = std::env::var_os("SKINRS_DEBUG").is_some();
+    let mark = |what: &str| {
+        if debug {
+            eprintln!("  {what}: {:?}", clock.elapsed());
+        }
+    };
     check_weights(w, k, method)?;
+    mark("checked");
     let (n, m) = w.dim();
     if let Some(v) = v {
         if v.nrows() != n {
@@ -246,6 +286,7 @@ pub fn reduce_weights<'a>(
     }
 
     let sets = influence_sets(w, k);
+    mark("sets");
     let mut alpha = Array2::<f64>::zeros((n, k));
     for vi in 0..n {
         let s: f64 = sets.row(vi).iter().map(|&i| w[[vi, i]]).sum();
@@ -294,19 +335,22 @@ pub fn reduce_weights<'a>(
         _ => {
             let v = need(v, "the rest vertices V", method)?;
             let f = need(f, "the triangles F", method)?;
-            let l = laplacian::cotan_laplacian(v, f)?;
+            check_surface(v.nrows(), f)?;
+            let l = operators::cotan_laplacian(v, f)?;
             match opts.energy {
                 Energy::Gradient => Coupling::dirichlet(&l),
                 Energy::SquaredLaplacian => {
-                    let mass = laplacian::barycentric_mass(v, f)?;
+                    let mass = operators::massmatrix(v, f, MassKind::Barycentric)?;
                     Coupling::squared_laplacian(&l, &mass)
                 }
             }
         }
     };
+    mark("coupling");
     // Renumber the vertices colour class by colour class (see `solver`).
     let (order, classes) = coupling.colour_order();
     let coupling = coupling.permuted(&order);
+    mark("colours");
     let rows = |a: ArrayView2<f64>| a.select(Axis(0), &order);
     let sets_p = sets.select(Axis(0), &order);
     let mut alpha_p = alpha.select(Axis(0), &order);
@@ -323,6 +367,7 @@ pub fn reduce_weights<'a>(
             pose_basis(w_p.view(), v_p.as_ref().map(|v| v.view()), p, &sets_p)?
         }
     };
+    mark("basis");
     let lp = match (opts.rest_control_points, v_p) {
         (Some(c), Some(v)) => Some(LinearPrecision { rest_points: c, v }),
         _ => None,
@@ -338,15 +383,19 @@ pub fn reduce_weights<'a>(
         order,
     };
     problem.make_feasible(&mut alpha_p)?;
+    mark("feasible");
     let report = problem.solve(
         &mut alpha_p,
         &SolveOptions {
             max_sweeps: opts.max_sweeps,
             tol: opts.tol,
             relaxation: opts.relaxation,
+            solver: opts.solver,
+            coarse: std::env::var_os("SKINRS_NO_COARSE").is_none(),
         },
         progress,
     )?;
+    mark("solved");
     for (i, &vi) in problem.order.iter().enumerate() {
         alpha.row_mut(vi).assign(&alpha_p.row(i));
     }
@@ -390,8 +439,7 @@ fn pose_basis(
                 Some(v) => v,
                 None => return invalid!("bone_transforms need the rest vertices V"),
             };
-            let idx = Array2::from_shape_fn((n, m), |(_, i)| i);
-            let x = deform_packed(v, idx.view(), w, &poses)?;
+            let x = deform(v, &crate::skin::Weights::Dense(w), &poses)?;
             let d = v.ncols();
             // (p, n, d) -> (n, p * d)
             let target = Array2::from_shape_fn((n, p * d), |(vi, c)| x[[c / d, vi, c % d]]);

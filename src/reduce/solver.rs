@@ -31,8 +31,8 @@ use crate::error::{SkinError, SkinResult};
 use crate::progress::{Event, Progress};
 use crate::sparse::Csc;
 
-use super::deform::Poses;
-use super::laplacian::point;
+use super::deform::{point, Poses};
+use super::coarse::Coarse;
 use super::qp::{self, LocalQp, QpFailure, QpWork};
 
 /// What a vertex's handles do over the example poses (the columns of `B_v`).
@@ -157,6 +157,26 @@ impl Basis {
     }
 }
 
+impl Basis {
+    /// `out = B_v^T y` for `y (q)` into `out (k)`; `b (k * q)` is scratch.
+    fn transpose(&self, vi: usize, set: &[usize], y: &[f64], b: &mut [f64], out: &mut [f64]) {
+        let q = self.q();
+        match self {
+            Basis::Select { .. } => {
+                for (o, &i) in out.iter_mut().zip(set) {
+                    *o = y[i];
+                }
+            }
+            _ => {
+                self.fill(vi, set, b);
+                for (t, o) in out.iter_mut().enumerate() {
+                    *o = b[t * q..(t + 1) * q].iter().zip(y).map(|(a, c)| a * c).sum();
+                }
+            }
+        }
+    }
+}
+
 /// The symmetric positive semi-definite `n x n` matrix `Q` of the objective `sum tr(E^T Q E)`,
 /// `E = X(alpha) - Xbar`, stored by columns (= rows).
 pub(crate) struct Coupling {
@@ -257,6 +277,24 @@ impl Coupling {
         self.ptr[v]..self.ptr[v + 1]
     }
 
+    /// The entries `(u, Q_vu)` of row (= column) `v`.
+    pub(crate) fn entries(&self, v: usize) -> impl Iterator<Item = (usize, f64)> + '_ {
+        self.col(v).map(move |p| (self.rows[p], self.val[p]))
+    }
+
+    /// `out = Q x` for `x (n, q)` flat, in parallel over rows (`Q` is symmetric: columns = rows).
+    fn apply(&self, x: &[f64], q: usize, out: &mut [f64]) {
+        out.par_chunks_mut(q).enumerate().for_each(|(v, o)| {
+            o.iter_mut().for_each(|y| *y = 0.0);
+            for p in self.col(v) {
+                let (u, w) = (self.rows[p], self.val[p]);
+                for (y, xu) in o.iter_mut().zip(&x[u * q..(u + 1) * q]) {
+                    *y += w * xu;
+                }
+            }
+        });
+    }
+
     /// Greedy colouring such that no two vertices of one class are coupled by `Q`. Returns the
     /// vertices ordered class by class and the class boundaries (`ptr`, length classes + 1).
     pub(crate) fn colour_order(&self) -> (Vec<usize>, Vec<usize>) {
@@ -347,7 +385,51 @@ pub(crate) struct SolveOptions {
     pub max_sweeps: usize,
     pub tol: f64,
     pub relaxation: f64,
+    pub solver: Solver,
+    /// Use the coarse space in conjugate gradients.
+    pub coarse: bool,
 }
+
+/// Which iteration minimises a coupled problem.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Solver {
+    /// Conjugate gradients when there are no bounds, the local iteration otherwise.
+    Auto,
+    /// The local iteration of Sec. 3.1 (block Gauss-Seidel / SOR over the colour classes).
+    Local,
+    /// Projected preconditioned conjugate gradients (equality constraints only).
+    Cg,
+}
+
+impl Solver {
+    /// Parses `"auto"`, `"local"` or `"cg"`.
+    pub fn parse(s: &str) -> SkinResult<Self> {
+        match s {
+            "auto" => Ok(Solver::Auto),
+            "local" => Ok(Solver::Local),
+            "cg" => Ok(Solver::Cg),
+            _ => crate::invalid!("unknown solver {s:?}: use 'auto', 'local' or 'cg'"),
+        }
+    }
+}
+
+/// The measured, scale-aware stopping rule: stop once the mean decrease of the objective over
+/// the last (up to) [`STOP_WINDOW`] iterations is at most `tol` times the decrease achieved since
+/// the start, `h[0] - h[s]`. Relative to what the iteration has achieved (not to `h[s]`, which
+/// may be near zero or dominated by an error no weight can remove), so it does not depend on the
+/// units of the poses; the window smooths the uneven decrease of conjugate gradients.
+pub(crate) fn should_stop(history: &[f64], tol: f64) -> bool {
+    let s = history.len() - 1;
+    if s == 0 {
+        return false;
+    }
+    let w = s.min(STOP_WINDOW);
+    let recent = (history[s - w] - history[s]) / w as f64;
+    recent <= tol * (history[0] - history[s])
+}
+
+/// Iterations averaged by [`should_stop`].
+pub(crate) const STOP_WINDOW: usize = 4;
 
 pub(crate) struct SolveReport {
     /// Objective before the first sweep and after each sweep.
@@ -510,6 +592,41 @@ impl Problem<'_> {
         }
     }
 
+    /// `c = B_v^T B_u (k x k)`, row-major.
+    pub(crate) fn cross_gram(&self, v: usize, u: usize, c: &mut [f64]) {
+        let k = self.k();
+        let (sv, su) = (self.sets.row(v), self.sets.row(u));
+        match &self.basis {
+            Basis::Cage { gram, .. } => {
+                for (t, &i) in sv.iter().enumerate() {
+                    for (s, &j) in su.iter().enumerate() {
+                        c[t * k + s] = gram[[i, j]];
+                    }
+                }
+            }
+            Basis::Select { .. } => {
+                for (t, &i) in sv.iter().enumerate() {
+                    for (s, &j) in su.iter().enumerate() {
+                        c[t * k + s] = (i == j) as u8 as f64;
+                    }
+                }
+            }
+            Basis::Bones { b, q, .. } => {
+                let q = *q;
+                let (bv, bu) = (&b[v * k * q..(v + 1) * k * q], &b[u * k * q..(u + 1) * k * q]);
+                for t in 0..k {
+                    for s in 0..k {
+                        c[t * k + s] = bv[t * q..(t + 1) * q]
+                            .iter()
+                            .zip(&bu[s * q..(s + 1) * q])
+                            .map(|(x, y)| x * y)
+                            .sum();
+                    }
+                }
+            }
+        }
+    }
+
     fn feasible(&self, vi: usize, alpha: &[f64], sc: &mut Scratch) -> bool {
         if self.nonneg && alpha.iter().any(|&a| a < 0.0) {
             return false;
@@ -564,7 +681,7 @@ impl Problem<'_> {
     }
 
     /// `E = X(alpha) - Xbar`, flat `(n, q)`.
-    fn error(&self, alpha: &Array2<f64>) -> Vec<f64> {
+    fn error(&self, alpha: ArrayView2<f64>) -> Vec<f64> {
         let n = self.sets.nrows();
         let q = self.basis.q();
         let k = self.k();
@@ -770,18 +887,50 @@ impl Problem<'_> {
         Some(FastOps { p, ok })
     }
 
-    /// Runs the sweeps from the feasible start `alpha` (n, k), in place.
+    /// Minimises from the feasible start `alpha` (n, k), in place: one exact sweep when no two
+    /// vertices interact (geometric), projected conjugate gradients for coupled problems
+    /// without bounds ([`Solver::Auto`] / [`Solver::Cg`]), the local iteration otherwise.
     pub(crate) fn solve(
         &self,
         alpha: &mut Array2<f64>,
         opts: &SolveOptions,
         progress: &mut dyn Progress,
     ) -> SkinResult<SolveReport> {
+        let clock = std::time::Instant::now();
+        let fast = self.fast_operators();
+        if std::env::var_os("SKINRS_DEBUG").is_some() {
+            eprintln!("  fast operators {:?}", clock.elapsed());
+        }
+        let decoupled = self.coupling.is_diagonal();
+        let cg_ok = !self.nonneg && fast.as_ref().is_some_and(|f| f.ok.iter().all(|&x| x));
+        match opts.solver {
+            Solver::Cg if !cg_ok => Err(SkinError::InvalidInput(
+                "solver='cg' needs nonnegative=False and non-degenerate constraints at every \
+                 vertex; use solver='local'"
+                    .into(),
+            )),
+            Solver::Cg | Solver::Auto if cg_ok && !decoupled => {
+                let fast = fast.expect("cg_ok implies operators");
+                self.solve_cg(alpha, opts, &fast, progress)
+            }
+            _ => self.solve_local(alpha, opts, fast.as_ref(), decoupled, progress),
+        }
+    }
+
+    /// The local iteration of Sec. 3.1: sweeps over the colour classes, every class in parallel.
+    fn solve_local(
+        &self,
+        alpha: &mut Array2<f64>,
+        opts: &SolveOptions,
+        fast: Option<&FastOps>,
+        decoupled: bool,
+        progress: &mut dyn Progress,
+    ) -> SkinResult<SolveReport> {
         let k = self.k();
         let q = self.basis.q();
         let r_rows = self.rows();
-        let mut e = self.error(alpha);
-        let mut f = self.objective(&e);
+        let mut e = self.error(alpha.view());
+        let f = self.objective(&e);
         let mut history = vec![f];
         progress.report(Event {
             stage: "reduce",
@@ -790,9 +939,7 @@ impl Problem<'_> {
         })?;
         let capped = AtomicUsize::new(0);
         let mut converged = false;
-        let fast = self.fast_operators();
         // Decoupled vertices: the exact block minimiser (no over-relaxation) in one sweep.
-        let decoupled = self.coupling.is_diagonal();
         let omega = if decoupled { 1.0 } else { opts.relaxation };
         let max_sweeps = if decoupled {
             opts.max_sweeps.min(1)
@@ -827,7 +974,7 @@ impl Problem<'_> {
                                 ev,
                                 &others,
                                 omega,
-                                fast.as_ref(),
+                                fast,
                                 sc,
                             )?;
                             if !conv {
@@ -839,7 +986,7 @@ impl Problem<'_> {
             }
             // E is updated incrementally; refresh it now and then against rounding drift.
             if sweep % 16 == 0 {
-                e = self.error(alpha);
+                e = self.error(alpha.view());
             }
             let f_new = self.objective(&e);
             history.push(f_new);
@@ -848,9 +995,7 @@ impl Problem<'_> {
                 iteration: sweep,
                 value: f_new,
             })?;
-            let decrease = f - f_new;
-            f = f_new;
-            if decoupled || decrease <= opts.tol * (f + decrease) {
+            if decoupled || should_stop(&history, opts.tol) {
                 converged = true;
                 break;
             }
@@ -861,4 +1006,177 @@ impl Problem<'_> {
             qp_capped: capped.into_inner(),
         })
     }
+    /// Projected preconditioned conjugate gradients for the problems without bounds.
+    ///
+    /// The objective is the quadratic `Phi(alpha) = tr(E^T Q E)`, `E = X(alpha) - Xbar`, under
+    /// the per-vertex equality rows `E_v alpha_v = e_v` only (sum to one, linear precision), so
+    /// its minimiser solves one sparse linear KKT system. The preconditioner is the block-diagonal
+    /// `P = diag(P_v)` of [`Problem::fast_operators`], the same `k x k` blocks the local iteration
+    /// uses: `P_v g` is the equality-constrained block step, and `E_v P_v = 0`, so every search
+    /// direction keeps the constraints (null-space PCG, Gould et al. 2001). Halving everything,
+    /// `grad_v = B_v^T (Q E)_v` and `(H d)_v = B_v^T (Q B d)_v + eps_v d_v` (the small `eps_v` of
+    /// [`Problem::local_hessian`] keeps `H` definite where the poses do not fix every weight).
+    /// Every step is an exact line search, so the objective never increases; it is reported
+    /// after every iteration, which plays the role of a sweep for `max_sweeps` and `tol`.
+    fn solve_cg(
+        &self,
+        alpha: &mut Array2<f64>,
+        opts: &SolveOptions,
+        fast: &FastOps,
+        progress: &mut dyn Progress,
+    ) -> SkinResult<SolveReport> {
+        let n = self.sets.nrows();
+        let k = self.k();
+        let q = self.basis.q();
+        let a = alpha
+            .as_slice_mut()
+            .ok_or_else(|| SkinError::Numerical("weights not contiguous".into()))?;
+        let eps: Vec<f64> = (0..n)
+            .into_par_iter()
+            .map_init(
+                || vec![0.0; k * k],
+                |g, v| {
+                    let set = self.sets.row(v);
+                    let set = set.as_slice().expect("sets are standard layout");
+                    self.basis.gram(v, set, g);
+                    let tr: f64 = (0..k).map(|t| g[t * k + t]).sum::<f64>() / k as f64;
+                    1e-9 * self.coupling.diag[v] * tr
+                },
+            )
+            .collect();
+        let dot = |x: &[f64], y: &[f64]| -> f64 {
+            x.par_chunks(4096)
+                .zip(y.par_chunks(4096))
+                .map(|(a, b)| a.iter().zip(b).map(|(u, w)| u * w).sum::<f64>())
+                .sum()
+        };
+        // y_v = B_v^T x_v for every vertex (x (n, q) -> y (n, k)).
+        let gather = |x: &[f64], y: &mut [f64]| {
+            y.par_chunks_mut(k).enumerate().for_each_init(
+                || vec![0.0; k * q],
+                |b, (v, yv)| {
+                    let set = self.sets.row(v);
+                    let set = set.as_slice().expect("sets are standard layout");
+                    self.basis.transpose(v, set, &x[v * q..(v + 1) * q], b, yv);
+                },
+            )
+        };
+        // Two-level preconditioner (see `coarse`): z_v = P_v g_v, plus Z H_c^-1 Z^T g.
+        let coarse = if self.rows() == 1 && opts.coarse {
+            Some(Coarse::new(self)?)
+        } else {
+            None
+        };
+        let precondition = |g: &[f64], z: &mut [f64]| {
+            z.par_chunks_mut(k).enumerate().for_each(|(v, zv)| {
+                let pv = &fast.p[v * k * k..(v + 1) * k * k];
+                let gv = &g[v * k..(v + 1) * k];
+                for (i, zi) in zv.iter_mut().enumerate() {
+                    *zi = pv[i * k..(i + 1) * k].iter().zip(gv).map(|(x, y)| x * y).sum();
+                }
+            });
+            if let Some(c) = &coarse {
+                c.add_correction(g, z);
+            }
+        };
+        // E = X(alpha) - Xbar, R = Q E, g = B^T R: refreshed from alpha now and then.
+        let mut e = self.error(alpha_view(a, n, k));
+        let mut r = vec![0.0; n * q];
+        let mut g = vec![0.0; n * k];
+        let refresh = |a: &[f64], e: &mut Vec<f64>, r: &mut [f64], g: &mut [f64]| {
+            *e = self.error(alpha_view(a, n, k));
+            self.coupling.apply(e, q, r);
+            gather(r, g);
+        };
+        self.coupling.apply(&e, q, &mut r);
+        gather(&r, &mut g);
+        let mut f = dot(&e, &r);
+        let mut history = vec![f];
+        progress.report(Event {
+            stage: "reduce",
+            iteration: 0,
+            value: f,
+        })?;
+        let mut z = vec![0.0; n * k];
+        precondition(&g, &mut z);
+        let mut p: Vec<f64> = z.iter().map(|x| -x).collect();
+        let mut gz = dot(&g, &z);
+        let (mut d, mut w, mut hp) = (vec![0.0; n * q], vec![0.0; n * q], vec![0.0; n * k]);
+        let mut converged = gz <= 0.0;
+        for it in 1..=opts.max_sweeps {
+            if converged {
+                break;
+            }
+            // D = B p, W = Q D, Hp = B^T W + eps p.
+            d.par_chunks_mut(q).enumerate().for_each_init(
+                || vec![0.0; k * q],
+                |b, (v, dv)| {
+                    let set = self.sets.row(v);
+                    let set = set.as_slice().expect("sets are standard layout");
+                    self.basis.position(v, set, &p[v * k..(v + 1) * k], b, dv);
+                },
+            );
+            self.coupling.apply(&d, q, &mut w);
+            gather(&w, &mut hp);
+            hp.par_chunks_mut(k)
+                .zip(p.par_chunks(k))
+                .zip(eps.par_iter())
+                .for_each(|((h, pv), &ev)| h.iter_mut().zip(pv).for_each(|(x, y)| *x += ev * y));
+            let php = dot(&p, &hp);
+            let gp = dot(&g, &p);
+            if !(php > 0.0 && php.is_finite()) || gp >= 0.0 {
+                converged = true;
+                break;
+            }
+            let t = -gp / php;
+            // Exact line search: Phi(alpha + t p) = Phi - t^2 p^T H p (H without eps).
+            a.par_iter_mut().zip(p.par_iter()).for_each(|(x, y)| *x += t * y);
+            e.par_iter_mut().zip(d.par_iter()).for_each(|(x, y)| *x += t * y);
+            r.par_iter_mut().zip(w.par_iter()).for_each(|(x, y)| *x += t * y);
+            g.par_iter_mut().zip(hp.par_iter()).for_each(|(x, y)| *x += t * y);
+            if it % 32 == 0 {
+                refresh(a, &mut e, &mut r, &mut g);
+            }
+            f = dot(&e, &r);
+            history.push(f);
+            progress.report(Event {
+                stage: "reduce",
+                iteration: it,
+                value: f,
+            })?;
+            if should_stop(&history, opts.tol) {
+                converged = true;
+                break;
+            }
+            precondition(&g, &mut z);
+            let gz_new = dot(&g, &z);
+            let beta = gz_new / gz;
+            gz = gz_new;
+            if !(gz > 0.0) {
+                converged = true;
+                break;
+            }
+            p.par_iter_mut().zip(z.par_iter()).for_each(|(x, y)| *x = beta * *x - y);
+        }
+        // Put every row exactly back on sum one (each step moves it by rounding only).
+        a.par_chunks_mut(k).for_each(|av| {
+            let shift = (av.iter().sum::<f64>() - 1.0) / k as f64;
+            av.iter_mut().for_each(|x| *x -= shift);
+        });
+        refresh(a, &mut e, &mut r, &mut g);
+        // The last entry is the objective of the returned weights.
+        if let Some(last) = history.last_mut() {
+            *last = dot(&e, &r);
+        }
+        Ok(SolveReport {
+            objective: history,
+            converged,
+            qp_capped: 0,
+        })
+    }
+}
+
+/// `(n, k)` view of the flat weights.
+fn alpha_view(a: &[f64], n: usize, k: usize) -> ArrayView2<'_, f64> {
+    ArrayView2::from_shape((n, k), a).expect("n * k weights")
 }
