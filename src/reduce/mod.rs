@@ -121,7 +121,7 @@ pub struct Reduction {
     pub objective: Vec<f64>,
     /// Whether the stopping rule was met before `max_sweeps`.
     pub converged: bool,
-    /// Number of colour classes (parallel batches per sweep).
+    /// Number of colour classes (parallel batches per sweep); 0 when conjugate gradients ran.
     pub colours: usize,
     /// Local QPs that hit their iteration cap (left feasible, not optimal); normally 0.
     pub qp_capped: usize,
@@ -244,15 +244,7 @@ pub fn reduce_weights<'a>(
     opts: &ReduceOptions<'a>,
     progress: &mut dyn Progress,
 ) -> SkinResult<Reduction> {
-    let clock = std::time::Instant::now();
-    let debug = std::env::var_os("SKINRS_DEBUG").is_some();
-    let mark = |what: &str| {
-        if debug {
-            eprintln!("  {what}: {:?}", clock.elapsed());
-        }
-    };
     check_weights(w, k, method)?;
-    mark("checked");
     let (n, m) = w.dim();
     if let Some(v) = v {
         if v.nrows() != n {
@@ -286,7 +278,6 @@ pub fn reduce_weights<'a>(
     }
 
     let sets = influence_sets(w, k);
-    mark("sets");
     let mut alpha = Array2::<f64>::zeros((n, k));
     for vi in 0..n {
         let s: f64 = sets.row(vi).iter().map(|&i| w[[vi, i]]).sum();
@@ -346,11 +337,29 @@ pub fn reduce_weights<'a>(
             }
         }
     };
-    mark("coupling");
-    // Renumber the vertices colour class by colour class (see `solver`).
-    let (order, classes) = coupling.colour_order();
-    let coupling = coupling.permuted(&order);
-    mark("colours");
+    // The local iteration renumbers the vertices colour class by colour class (see `solver`);
+    // conjugate gradients keep the input order (better locality) and one class.
+    let use_cg = opts.solver != Solver::Local
+        && !opts.nonnegative
+        && method != Method::Geometric
+        && (method != Method::Smooth || k < u8::MAX as usize)
+        && (opts.solver == Solver::Cg || n.saturating_mul(k * k) <= solver::FAST_LIMIT);
+    if opts.solver == Solver::Cg && !use_cg {
+        return invalid!(
+            "solver='cg' needs nonnegative=False and a coupled method (smooth or poisson); \
+             use solver='local' or 'auto'"
+        );
+    }
+    let (order, classes) = if use_cg {
+        ((0..n).collect(), vec![0, n])
+    } else {
+        coupling.colour_order()
+    };
+    let coupling = if use_cg {
+        coupling
+    } else {
+        coupling.permuted(&order)
+    };
     let rows = |a: ArrayView2<f64>| a.select(Axis(0), &order);
     let sets_p = sets.select(Axis(0), &order);
     let mut alpha_p = alpha.select(Axis(0), &order);
@@ -367,7 +376,6 @@ pub fn reduce_weights<'a>(
             pose_basis(w_p.view(), v_p.as_ref().map(|v| v.view()), p, &sets_p)?
         }
     };
-    mark("basis");
     let lp = match (opts.rest_control_points, v_p) {
         (Some(c), Some(v)) => Some(LinearPrecision { rest_points: c, v }),
         _ => None,
@@ -383,19 +391,16 @@ pub fn reduce_weights<'a>(
         order,
     };
     problem.make_feasible(&mut alpha_p)?;
-    mark("feasible");
     let report = problem.solve(
         &mut alpha_p,
         &SolveOptions {
             max_sweeps: opts.max_sweeps,
             tol: opts.tol,
             relaxation: opts.relaxation,
-            solver: opts.solver,
-            coarse: std::env::var_os("SKINRS_NO_COARSE").is_none(),
+            cg: use_cg,
         },
         progress,
     )?;
-    mark("solved");
     for (i, &vi) in problem.order.iter().enumerate() {
         alpha.row_mut(vi).assign(&alpha_p.row(i));
     }
@@ -404,7 +409,7 @@ pub fn reduce_weights<'a>(
         weights: alpha,
         objective: report.objective,
         converged: report.converged,
-        colours: problem.classes.len() - 1,
+        colours: if use_cg { 0 } else { problem.classes.len() - 1 },
         qp_capped: report.qp_capped,
     })
 }

@@ -145,7 +145,15 @@ impl Basis {
                     x[i] += a;
                 }
             }
-            _ => {
+            Basis::Cage { cq, .. } => {
+                let cq = cq.as_slice().expect("cq is standard layout");
+                for (&i, &a) in set.iter().zip(alpha) {
+                    for (xc, bc) in x.iter_mut().zip(&cq[i * q..(i + 1) * q]) {
+                        *xc += a * bc;
+                    }
+                }
+            }
+            Basis::Bones { .. } => {
                 self.fill(vi, set, b);
                 for (t, &a) in alpha.iter().enumerate() {
                     for (xc, bc) in x.iter_mut().zip(&b[t * q..(t + 1) * q]) {
@@ -167,7 +175,13 @@ impl Basis {
                     *o = y[i];
                 }
             }
-            _ => {
+            Basis::Cage { cq, .. } => {
+                let cq = cq.as_slice().expect("cq is standard layout");
+                for (o, &i) in out.iter_mut().zip(set) {
+                    *o = cq[i * q..(i + 1) * q].iter().zip(y).map(|(a, c)| a * c).sum();
+                }
+            }
+            Basis::Bones { .. } => {
                 self.fill(vi, set, b);
                 for (t, o) in out.iter_mut().enumerate() {
                     *o = b[t * q..(t + 1) * q].iter().zip(y).map(|(a, c)| a * c).sum();
@@ -385,9 +399,8 @@ pub(crate) struct SolveOptions {
     pub max_sweeps: usize,
     pub tol: f64,
     pub relaxation: f64,
-    pub solver: Solver,
-    /// Use the coarse space in conjugate gradients.
-    pub coarse: bool,
+    /// Conjugate gradients (vertices in input order, one class) instead of the local iteration.
+    pub cg: bool,
 }
 
 /// Which iteration minimises a coupled problem.
@@ -427,6 +440,9 @@ pub(crate) fn should_stop(history: &[f64], tol: f64) -> bool {
     let recent = (history[s - w] - history[s]) / w as f64;
     recent <= tol * (history[0] - history[s])
 }
+
+/// Most entries of the per-vertex `k x k` blocks kept in memory (256 MB).
+pub(crate) const FAST_LIMIT: usize = 1 << 25;
 
 /// Iterations averaged by [`should_stop`].
 pub(crate) const STOP_WINDOW: usize = 4;
@@ -592,15 +608,51 @@ impl Problem<'_> {
         }
     }
 
+    /// For every coupling entry `(v, u)` (in storage order) and slot `t` of `v`: the slot of `u`
+    /// holding the same handle, or `u8::MAX` (smooth method; `k <= 254`).
+    fn shared_slots(&self) -> Vec<u8> {
+        let k = self.k();
+        let c = &self.coupling;
+        let mut out = vec![u8::MAX; c.rows.len() * k];
+        let n = self.sets.nrows();
+        let ptr = &c.ptr;
+        let chunks: Vec<(usize, &mut [u8])> = {
+            let mut v = Vec::with_capacity(n);
+            let mut rest: &mut [u8] = &mut out;
+            for col in 0..n {
+                let len = (ptr[col + 1] - ptr[col]) * k;
+                let (head, tail) = rest.split_at_mut(len);
+                v.push((col, head));
+                rest = tail;
+            }
+            v
+        };
+        chunks.into_par_iter().for_each(|(v, o)| {
+            let sv = self.sets.row(v);
+            for (x, pos) in c.col(v).enumerate() {
+                let su = self.sets.row(c.rows[pos]);
+                for (t, &i) in sv.iter().enumerate() {
+                    if let Some(sl) = su.iter().position(|&j| j == i) {
+                        o[x * k + t] = sl as u8;
+                    }
+                }
+            }
+        });
+        out
+    }
+
     /// `c = B_v^T B_u (k x k)`, row-major.
     pub(crate) fn cross_gram(&self, v: usize, u: usize, c: &mut [f64]) {
         let k = self.k();
         let (sv, su) = (self.sets.row(v), self.sets.row(u));
         match &self.basis {
             Basis::Cage { gram, .. } => {
+                let m = gram.ncols();
+                let gram = gram.as_slice().expect("gram is standard layout");
                 for (t, &i) in sv.iter().enumerate() {
+                    let row = &gram[i * m..(i + 1) * m];
                     for (s, &j) in su.iter().enumerate() {
-                        c[t * k + s] = gram[[i, j]];
+                        c[t * k + s] = row[j];
                     }
                 }
             }
@@ -861,12 +913,12 @@ impl Problem<'_> {
 
     /// Per-vertex projected inverses `P_v = H^-1 - H^-1 E^T (E H^-1 E^T)^-1 E H^-1`: with them
     /// an equality-constrained block step is one `k x k` product. `None` when they would take
-    /// more than ~128 MB (then every step runs the active-set QP).
+    /// more than [`FAST_LIMIT`] entries (then every step runs the active-set QP).
     fn fast_operators(&self) -> Option<FastOps> {
         let n = self.sets.nrows();
         let k = self.k();
         let r = self.rows();
-        if n.saturating_mul(k * k) > 1 << 24 {
+        if n.saturating_mul(k * k) > FAST_LIMIT {
             return None;
         }
         let mut p = vec![0.0; n * k * k];
@@ -896,24 +948,21 @@ impl Problem<'_> {
         opts: &SolveOptions,
         progress: &mut dyn Progress,
     ) -> SkinResult<SolveReport> {
-        let clock = std::time::Instant::now();
         let fast = self.fast_operators();
-        if std::env::var_os("SKINRS_DEBUG").is_some() {
-            eprintln!("  fast operators {:?}", clock.elapsed());
-        }
         let decoupled = self.coupling.is_diagonal();
-        let cg_ok = !self.nonneg && fast.as_ref().is_some_and(|f| f.ok.iter().all(|&x| x));
-        match opts.solver {
-            Solver::Cg if !cg_ok => Err(SkinError::InvalidInput(
-                "solver='cg' needs nonnegative=False and non-degenerate constraints at every \
-                 vertex; use solver='local'"
+        if !opts.cg {
+            return self.solve_local(alpha, opts, fast.as_ref(), decoupled, progress);
+        }
+        match &fast {
+            Some(f) => match f.ok.iter().position(|&x| !x) {
+                None => self.solve_cg(alpha, opts, f, progress),
+                Some(v) => Err(qp_error(self.order[v], QpFailure::DependentConstraints)),
+            },
+            None => Err(SkinError::InvalidInput(
+                "conjugate gradients need n k^2 <= 2^25 (memory for the per-vertex blocks); \
+                 use solver='local'"
                     .into(),
             )),
-            Solver::Cg | Solver::Auto if cg_ok && !decoupled => {
-                let fast = fast.expect("cg_ok implies operators");
-                self.solve_cg(alpha, opts, &fast, progress)
-            }
-            _ => self.solve_local(alpha, opts, fast.as_ref(), decoupled, progress),
         }
     }
 
@@ -1062,7 +1111,7 @@ impl Problem<'_> {
             )
         };
         // Two-level preconditioner (see `coarse`): z_v = P_v g_v, plus Z H_c^-1 Z^T g.
-        let coarse = if self.rows() == 1 && opts.coarse {
+        let coarse = if self.rows() == 1 {
             Some(Coarse::new(self)?)
         } else {
             None
@@ -1079,18 +1128,57 @@ impl Problem<'_> {
                 c.add_correction(g, z);
             }
         };
-        // E = X(alpha) - Xbar, R = Q E, g = B^T R: refreshed from alpha now and then.
-        let mut e = self.error(alpha_view(a, n, k));
-        let mut r = vec![0.0; n * q];
-        let mut g = vec![0.0; n * k];
-        let refresh = |a: &[f64], e: &mut Vec<f64>, r: &mut [f64], g: &mut [f64]| {
-            *e = self.error(alpha_view(a, n, k));
-            self.coupling.apply(e, q, r);
-            gather(r, g);
+        // The smooth method (`x_v` = the weight row, q = m) works on the weights alone:
+        // `(H p)_v[t] = sum_u Q_vu p_u[s]` over the slots `s` of u holding handle `S_vt`, with
+        // `Phi = alpha.H alpha - 2 alpha.b0 + c`, `b0 = B^T Q Xbar`, `c = tr(Xbar^T Q Xbar)`, so
+        // the dense `E, R (n, m)` are never formed. The other bases keep `E = X - Xbar` and
+        // `R = Q E` (q is small) and measure `Phi = tr(E^T R)` directly.
+        let select = matches!(self.basis, Basis::Select { .. });
+        let slots = if select { self.shared_slots() } else { Vec::new() };
+        let hess_select = |p: &[f64], hp: &mut [f64]| {
+            let c = &self.coupling;
+            hp.par_chunks_mut(k).enumerate().for_each(|(v, h)| {
+                h.iter_mut().for_each(|x| *x = 0.0);
+                for pos in c.col(v) {
+                    let (u, w) = (c.rows[pos], c.val[pos]);
+                    let pu = &p[u * k..(u + 1) * k];
+                    for (t, hv) in h.iter_mut().enumerate() {
+                        let sl = slots[pos * k + t];
+                        if sl != u8::MAX {
+                            *hv += w * pu[sl as usize];
+                        }
+                    }
+                }
+            });
         };
-        self.coupling.apply(&e, q, &mut r);
-        gather(&r, &mut g);
-        let mut f = dot(&e, &r);
+        let (mut e, mut r) = (Vec::new(), Vec::new());
+        let mut g = vec![0.0; n * k];
+        let (b0, c0) = if select {
+            let mut qx = vec![0.0; n * q];
+            let xbar = self.target.as_slice().expect("target is standard layout");
+            self.coupling.apply(xbar, q, &mut qx);
+            let mut b0 = vec![0.0; n * k];
+            gather(&qx, &mut b0);
+            (b0, dot(xbar, &qx))
+        } else {
+            (Vec::new(), 0.0)
+        };
+        // Objective and halved gradient g = B^T Q (X - Xbar) from alpha.
+        let measure = |a: &[f64], g: &mut [f64], e: &mut Vec<f64>, r: &mut Vec<f64>| {
+            if select {
+                hess_select(a, g);
+                let f = dot(a, g) - 2.0 * dot(a, &b0) + c0;
+                g.par_iter_mut().zip(b0.par_iter()).for_each(|(x, y)| *x -= y);
+                f
+            } else {
+                *e = self.error(alpha_view(a, n, k));
+                r.resize(n * q, 0.0);
+                self.coupling.apply(e, q, r);
+                gather(r, g);
+                dot(e, r)
+            }
+        };
+        let mut f = measure(a, &mut g, &mut e, &mut r);
         let mut history = vec![f];
         progress.report(Event {
             stage: "reduce",
@@ -1101,43 +1189,59 @@ impl Problem<'_> {
         precondition(&g, &mut z);
         let mut p: Vec<f64> = z.iter().map(|x| -x).collect();
         let mut gz = dot(&g, &z);
-        let (mut d, mut w, mut hp) = (vec![0.0; n * q], vec![0.0; n * q], vec![0.0; n * k]);
+        let (mut d, mut w) = if select {
+            (Vec::new(), Vec::new())
+        } else {
+            (vec![0.0; n * q], vec![0.0; n * q])
+        };
+        let mut hp = vec![0.0; n * k];
         let mut converged = gz <= 0.0;
         for it in 1..=opts.max_sweeps {
             if converged {
                 break;
             }
-            // D = B p, W = Q D, Hp = B^T W + eps p.
-            d.par_chunks_mut(q).enumerate().for_each_init(
-                || vec![0.0; k * q],
-                |b, (v, dv)| {
-                    let set = self.sets.row(v);
-                    let set = set.as_slice().expect("sets are standard layout");
-                    self.basis.position(v, set, &p[v * k..(v + 1) * k], b, dv);
-                },
-            );
-            self.coupling.apply(&d, q, &mut w);
-            gather(&w, &mut hp);
-            hp.par_chunks_mut(k)
-                .zip(p.par_chunks(k))
-                .zip(eps.par_iter())
-                .for_each(|((h, pv), &ev)| h.iter_mut().zip(pv).for_each(|(x, y)| *x += ev * y));
+            if select {
+                hess_select(&p, &mut hp);
+            } else {
+                // D = B p, W = Q D, Hp = B^T W + eps p.
+                d.par_chunks_mut(q).enumerate().for_each_init(
+                    || vec![0.0; k * q],
+                    |b, (v, dv)| {
+                        let set = self.sets.row(v);
+                        let set = set.as_slice().expect("sets are standard layout");
+                        self.basis.position(v, set, &p[v * k..(v + 1) * k], b, dv);
+                    },
+                );
+                self.coupling.apply(&d, q, &mut w);
+                gather(&w, &mut hp);
+                hp.par_chunks_mut(k)
+                    .zip(p.par_chunks(k))
+                    .zip(eps.par_iter())
+                    .for_each(|((h, pv), &ev)| {
+                        h.iter_mut().zip(pv).for_each(|(x, y)| *x += ev * y)
+                    });
+            }
             let php = dot(&p, &hp);
             let gp = dot(&g, &p);
             if !(php > 0.0 && php.is_finite()) || gp >= 0.0 {
                 converged = true;
                 break;
             }
+            // Exact line search along p.
             let t = -gp / php;
-            // Exact line search: Phi(alpha + t p) = Phi - t^2 p^T H p (H without eps).
             a.par_iter_mut().zip(p.par_iter()).for_each(|(x, y)| *x += t * y);
-            e.par_iter_mut().zip(d.par_iter()).for_each(|(x, y)| *x += t * y);
-            r.par_iter_mut().zip(w.par_iter()).for_each(|(x, y)| *x += t * y);
             g.par_iter_mut().zip(hp.par_iter()).for_each(|(x, y)| *x += t * y);
             if it % 32 == 0 {
-                refresh(a, &mut e, &mut r, &mut g);
+                // Against rounding drift: measure from scratch now and then.
+                f = measure(a, &mut g, &mut e, &mut r);
+            } else if select {
+                // Phi(alpha + t p) = Phi + 2 t g.p + t^2 p.Hp = Phi + t g.p (g, H halved).
+                f += t * gp;
+            } else {
+                e.par_iter_mut().zip(d.par_iter()).for_each(|(x, y)| *x += t * y);
+                r.par_iter_mut().zip(w.par_iter()).for_each(|(x, y)| *x += t * y);
+                f = dot(&e, &r);
             }
-            f = dot(&e, &r);
             history.push(f);
             progress.report(Event {
                 stage: "reduce",
@@ -1163,10 +1267,10 @@ impl Problem<'_> {
             let shift = (av.iter().sum::<f64>() - 1.0) / k as f64;
             av.iter_mut().for_each(|x| *x -= shift);
         });
-        refresh(a, &mut e, &mut r, &mut g);
-        // The last entry is the objective of the returned weights.
+        // The last entry is the objective of the returned weights, measured from scratch.
+        let f_end = measure(a, &mut g, &mut e, &mut r);
         if let Some(last) = history.last_mut() {
-            *last = dot(&e, &r);
+            *last = f_end;
         }
         Ok(SolveReport {
             objective: history,
