@@ -14,7 +14,7 @@ mod deform;
 pub(crate) mod qp;
 mod solver;
 
-use ndarray::{Array2, ArrayView2, Axis};
+use ndarray::{Array2, ArrayView2, Axis, CowArray, Ix2};
 use rayon::prelude::*;
 
 use crate::error::SkinResult;
@@ -131,28 +131,53 @@ pub struct Reduction {
 const POU_TOL: f64 = 1e-6;
 
 /// Influence sets: the `k` largest weights of every row (ties to the lower index), in decreasing
-/// order.
-fn influence_sets(w: ArrayView2<f64>, k: usize) -> Array2<usize> {
+/// order, and those weights renormalised to sum to one (the k-largest reduction). One pass per
+/// row keeping the best `k` in a sorted buffer: most entries are rejected by one comparison.
+fn influence_sets(w: ArrayView2<f64>, k: usize) -> SkinResult<(Array2<usize>, Array2<f64>)> {
     let (n, m) = w.dim();
+    let ws = crate::skin::standard2(w);
+    let ws = ws.as_slice().expect("standard layout");
     let mut sets = Array2::<usize>::zeros((n, k));
-    sets.as_slice_mut()
+    let mut alpha = Array2::<f64>::zeros((n, k));
+    let bad = sets
+        .as_slice_mut()
         .expect("fresh array is contiguous")
         .par_chunks_mut(k)
+        .zip(
+            alpha
+                .as_slice_mut()
+                .expect("fresh array is contiguous")
+                .par_chunks_mut(k),
+        )
         .enumerate()
-        .for_each_init(
-            || (0..m).collect::<Vec<usize>>(),
-            |order, (v, out)| {
-                let row = w.row(v);
-                order.iter_mut().enumerate().for_each(|(i, o)| *o = i);
-                let cmp = |a: &usize, b: &usize| row[*b].total_cmp(&row[*a]).then(a.cmp(b));
-                if k < m {
-                    order.select_nth_unstable_by(k - 1, cmp);
+        .find_map_first(|(v, (idx, val))| {
+            let row = &ws[v * m..(v + 1) * m];
+            let mut len = 0;
+            for (i, &x) in row.iter().enumerate() {
+                if len == k && x <= val[k - 1] {
+                    continue; // ties keep the earlier (lower) index
                 }
-                order[..k].sort_by(cmp);
-                out.copy_from_slice(&order[..k]);
-            },
-        );
-    sets
+                let mut p = len.min(k - 1);
+                while p > 0 && val[p - 1] < x {
+                    val[p] = val[p - 1];
+                    idx[p] = idx[p - 1];
+                    p -= 1;
+                }
+                val[p] = x;
+                idx[p] = i;
+                len = (len + 1).min(k);
+            }
+            let s: f64 = val.iter().sum();
+            if s.is_nan() || s <= 0.0 {
+                return Some((v, s));
+            }
+            val.iter_mut().for_each(|x| *x /= s);
+            None
+        });
+    if let Some((v, s)) = bad {
+        return invalid!("the k largest weights of W row {v} sum to {s}: cannot renormalise");
+    }
+    Ok((sets, alpha))
 }
 
 /// Checks `W (n, m)` and `k`.
@@ -164,8 +189,13 @@ fn check_weights(w: ArrayView2<f64>, k: usize, method: Method) -> SkinResult<()>
     if k < 1 || k > m {
         return invalid!("k must be between 1 and the number of handles m = {m}, got {k}");
     }
-    if let Some(i) = w.iter().position(|x| !x.is_finite()) {
-        return invalid!("W has a NaN or infinite entry (row {})", i / m);
+    let ws = crate::skin::standard2(w);
+    let ws = ws.as_slice().expect("standard layout");
+    if let Some(v) = ws
+        .par_chunks(m)
+        .position_first(|r| r.iter().any(|x| !x.is_finite()))
+    {
+        return invalid!("W has a NaN or infinite entry (row {v})");
     }
     if method != Method::KLargest {
         for (v, row) in w.rows().into_iter().enumerate() {
@@ -277,17 +307,7 @@ pub fn reduce_weights<'a>(
         );
     }
 
-    let sets = influence_sets(w, k);
-    let mut alpha = Array2::<f64>::zeros((n, k));
-    for vi in 0..n {
-        let s: f64 = sets.row(vi).iter().map(|&i| w[[vi, i]]).sum();
-        if s.is_nan() || s <= 0.0 {
-            return invalid!("the k largest weights of W row {vi} sum to {s}: cannot renormalise");
-        }
-        for (t, &i) in sets.row(vi).iter().enumerate() {
-            alpha[[vi, t]] = w[[vi, i]] / s;
-        }
-    }
+    let (sets, mut alpha) = influence_sets(w, k)?;
     if method == Method::KLargest {
         if opts.nonnegative {
             if let Some(i) = alpha.iter().position(|&a| a < 0.0) {
@@ -350,30 +370,40 @@ pub fn reduce_weights<'a>(
              use solver='local' or 'auto'"
         );
     }
-    let (order, classes) = if use_cg {
+    // Conjugate gradients and decoupled vertices (geometric) need no colouring: input order.
+    let in_order = use_cg || method == Method::Geometric;
+    let (order, classes) = if in_order {
         ((0..n).collect(), vec![0, n])
     } else {
         coupling.colour_order()
     };
-    let coupling = if use_cg {
-        coupling
+    let (coupling, sets_p, mut alpha_p, v_p) = if in_order {
+        (coupling, sets.clone(), alpha.clone(), v.map(|v| v.to_owned()))
     } else {
-        coupling.permuted(&order)
+        let rows = |a: ArrayView2<f64>| a.select(Axis(0), &order);
+        (
+            coupling.permuted(&order),
+            sets.select(Axis(0), &order),
+            alpha.select(Axis(0), &order),
+            v.map(rows),
+        )
     };
-    let rows = |a: ArrayView2<f64>| a.select(Axis(0), &order);
-    let sets_p = sets.select(Axis(0), &order);
-    let mut alpha_p = alpha.select(Axis(0), &order);
-    let w_p = rows(w);
-    let v_p = v.map(rows);
+    let w_p = |w: ArrayView2<'a, f64>| -> CowArray<'a, f64, Ix2> {
+        if in_order {
+            CowArray::from(w)
+        } else {
+            CowArray::from(w.select(Axis(0), &order))
+        }
+    };
     let (basis, target) = match method {
-        Method::Smooth => (Basis::Select { m }, w_p),
+        Method::Smooth => (Basis::Select { m }, w_p(w).into_owned()),
         _ => {
             let p = *need(
                 poses,
                 "example poses (control_points or bone_transforms)",
                 method,
             )?;
-            pose_basis(w_p.view(), v_p.as_ref().map(|v| v.view()), p, &sets_p)?
+            pose_basis(w_p(w).view(), v_p.as_ref().map(|v| v.view()), p, &sets_p)?
         }
     };
     let lp = match (opts.rest_control_points, v_p) {

@@ -948,8 +948,13 @@ impl Problem<'_> {
         opts: &SolveOptions,
         progress: &mut dyn Progress,
     ) -> SkinResult<SolveReport> {
-        let fast = self.fast_operators();
         let decoupled = self.coupling.is_diagonal();
+        // One exact sweep of decoupled vertices solves each local QP once: no blocks to reuse.
+        let fast = if decoupled {
+            None
+        } else {
+            self.fast_operators()
+        };
         if !opts.cg {
             return self.solve_local(alpha, opts, fast.as_ref(), decoupled, progress);
         }
