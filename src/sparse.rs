@@ -34,4 +34,3 @@ pub(crate) fn cholesky(a: &Csc) -> Result<Llt<usize, f64>, String> {
         .map_err(|e| format!("symbolic analysis: {e:?}"))?;
     Llt::try_new_with_symbolic(symbolic, a.as_ref(), Side::Lower).map_err(|e| format!("{e:?}"))
 }
-

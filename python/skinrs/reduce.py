@@ -69,12 +69,12 @@ __all__ = [
 class ReductionInfo:
     """How a reduction went.
 
-    objective : (s+1,) global objective before the first sweep and after each sweep
-        (empty for k-largest); never increases.
-    sweeps : number of sweeps run.
-    converged : whether a sweep lowered the objective by less than ``tol`` relative before
-        ``max_sweeps``.
-    colours : number of colour classes (parallel batches of one sweep).
+    objective : (s+1,) global objective before the first sweep and after each sweep or
+        conjugate-gradient iteration (empty for k-largest); never increases.
+    sweeps : number of sweeps (or iterations) run.
+    converged : whether the stopping rule (see ``tol``) was met before ``max_sweeps``.
+    colours : number of colour classes (parallel batches of one sweep); 0 when conjugate
+        gradients ran.
     qp_capped : local QPs that hit their active-set iteration cap (normally 0).
     nonnegative : the non-negativity setting used.
     """
@@ -216,19 +216,35 @@ def reduce_weights(
         Keep every weight >= 0. Default: True for skeletons (``bone_transforms``) and whenever
         ``W`` has no negative entry (harmonic, BBW), False otherwise (e.g. mean value coordinates).
     max_sweeps : int
-        Upper bound on the sweeps of the local iteration.
+        Upper bound on the sweeps of the local iteration (or the iterations of conjugate
+        gradients).
     tol : float
-        Stop when one sweep lowers the global objective by less than ``tol`` times its value.
+        Stopping rule, measured on the global objective ``h`` (``h[0]`` at the k-largest start,
+        ``h[s]`` after sweep ``s``) and independent of its units: stop at the first sweep where
+        the mean decrease over the last (up to) 4 sweeps is at most ``tol * (h[0] - h[s])``,
+        i.e. the iteration has stopped making progress relative to what it has achieved.
     relaxation : float in (0, 2)
-        Over-relaxation of each per-vertex step (1 = plain block Gauss-Seidel as in the paper;
-        the default 1.9 needs several times fewer sweeps and reaches the same minimum).
+        Over-relaxation of each per-vertex step of the local iteration (1 = plain block
+        Gauss-Seidel as in the paper; the default 1.9 needs several times fewer sweeps and
+        reaches the same minimum).
     energy : {"gradient", "laplacian"}
         How smooth and Poisson compare functions on the surface. ``"gradient"`` (default):
         ``int |grad(phi - psi)|^2 dA``, the Poisson problem of Sec. 3.3 in its gradient form
         ``min int |grad phi - w|^2``; ``"laplacian"``: ``int (lap(phi - psi))^2 dA``, eqs. (4)-(5)
         as printed. The squared Laplacian barely penalises smooth (low-frequency) errors, so its
-        minimiser drifts away from the example poses and converges very slowly; on the rigs we
-        tried it gave larger normal errors than k-largest.
+        minimiser drifts away from the example poses and converges slowly. Measured on held-out
+        poses (7 fitting, 8 held-out random poses, seeds 1/2, non-negative weights), RMS normal
+        deviation / position error: hand-403 20 -> 4: gradient 0.0244 rad / 0.085 %, laplacian
+        0.0507 rad / 0.240 % (converged without bounds: 0.0597 / 0.295), k-largest 0.0278 /
+        0.059; arm 4 -> 2: gradient 0.0035 / 0.045, laplacian 0.0045 / 0.052, k-largest
+        0.0045 / 0.052. Hence the default.
+    solver : {"auto", "local", "cg"}
+        How coupled problems (smooth, Poisson) are minimised. ``"local"``: the local iteration
+        of Sec. 3.1 (per-vertex QPs over graph-colour classes in parallel, over-relaxed);
+        ``"cg"``: projected conjugate gradients preconditioned by the same per-vertex blocks plus
+        a coarse space (handle weight shifts on ~64-vertex aggregates), for ``nonnegative=False``
+        only; ``"auto"`` (default): ``"cg"`` without bounds, ``"local"`` with them. Both report the
+        objective after every sweep / iteration and reach the same minimiser.
     return_info : bool
         Also return a :class:`ReductionInfo` (objective per sweep, ...).
     callback : callable(stage, iteration, value) -> bool | None, optional

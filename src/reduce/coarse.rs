@@ -91,7 +91,14 @@ impl Coarse {
         let blocks: Vec<Vec<Triplet<usize, usize, f64>>> = (0..na)
             .into_par_iter()
             .map_init(
-                || (vec![usize::MAX; nc], vec![0.0; 3 * k + k * k], Vec::new(), Vec::new()),
+                || {
+                    (
+                        vec![usize::MAX; nc],
+                        vec![0.0; 3 * k + k * k],
+                        Vec::new(),
+                        Vec::new(),
+                    )
+                },
                 |(pos, c, cols, acc), a| {
                     let (base, rows) = (dstart[a], dstart[a + 1] - dstart[a]);
                     cols.clear();

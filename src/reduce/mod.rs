@@ -3,7 +3,8 @@
 //!
 //! - [`reduce_weights`]: the k-largest baseline, smooth (Sec. 3.1), geometric (3.2, eq. 3) and
 //!   Poisson (3.3, eq. 5) reductions for cages (control points) and skeletons (Sec. 4), solved by
-//!   the parallel local iteration of Sec. 3.1 ([`solver`]) with exact per-vertex QPs ([`qp`]).
+//!   the parallel local iteration of Sec. 3.1 ([`solver`]) with exact per-vertex QPs ([`qp`]),
+//!   or without bounds by preconditioned conjugate gradients ([`solver`], [`coarse`]).
 //! - [`deform`] (the shared linear blend skinning over all example poses),
 //!   [`transform_normals`] (Sec. 5) and [`deformation_errors`] (Sec. 6).
 
@@ -216,7 +217,10 @@ fn check_weights(w: ArrayView2<f64>, k: usize, method: Method) -> SkinResult<()>
 /// off the surface would have an empty Laplacian row and an undetermined weight).
 fn check_surface(n: usize, f: ArrayView2<usize>) -> SkinResult<()> {
     if f.ncols() != 3 || f.nrows() == 0 {
-        return invalid!("F must hold at least one triangle (t, 3), got shape {:?}", f.dim());
+        return invalid!(
+            "F must hold at least one triangle (t, 3), got shape {:?}",
+            f.dim()
+        );
     }
     let mut used = vec![false; n];
     for (t, tri) in f.rows().into_iter().enumerate() {
@@ -378,7 +382,12 @@ pub fn reduce_weights<'a>(
         coupling.colour_order()
     };
     let (coupling, sets_p, mut alpha_p, v_p) = if in_order {
-        (coupling, sets.clone(), alpha.clone(), v.map(|v| v.to_owned()))
+        (
+            coupling,
+            sets.clone(),
+            alpha.clone(),
+            v.map(|v| v.to_owned()),
+        )
     } else {
         let rows = |a: ArrayView2<f64>| a.select(Axis(0), &order);
         (

@@ -20,8 +20,13 @@
 //! the squared Laplacian, > 1 for `-L`) do not interact, so a greedy colouring of `Q`'s graph gives
 //! classes that are updated in parallel; the sweep over all classes is block Gauss-Seidel,
 //! optionally over-relaxed. `E` and `R` are kept up to date, so the global objective is measured
-//! after every sweep and the iteration stops when a sweep decreases it by less than `tol`
-//! relative.
+//! after every sweep.
+//!
+//! Without bounds the problem is linear (one sparse KKT system), and [`Problem::solve_cg`]
+//! minimises it by projected conjugate gradients with the same per-vertex blocks as
+//! preconditioner plus an aggregation coarse space ([`super::coarse`]); it reports the
+//! objective after every iteration in the same way. Both stop by [`should_stop`]: when the
+//! mean decrease over the last few sweeps is at most `tol` times the decrease since the start.
 
 use ndarray::{Array2, ArrayView2};
 use rayon::prelude::*;
@@ -31,8 +36,8 @@ use crate::error::{SkinError, SkinResult};
 use crate::progress::{Event, Progress};
 use crate::sparse::Csc;
 
-use super::deform::{point, Poses};
 use super::coarse::Coarse;
+use super::deform::{point, Poses};
 use super::qp::{self, LocalQp, QpFailure, QpWork};
 
 /// What a vertex's handles do over the example poses (the columns of `B_v`).
@@ -178,13 +183,21 @@ impl Basis {
             Basis::Cage { cq, .. } => {
                 let cq = cq.as_slice().expect("cq is standard layout");
                 for (o, &i) in out.iter_mut().zip(set) {
-                    *o = cq[i * q..(i + 1) * q].iter().zip(y).map(|(a, c)| a * c).sum();
+                    *o = cq[i * q..(i + 1) * q]
+                        .iter()
+                        .zip(y)
+                        .map(|(a, c)| a * c)
+                        .sum();
                 }
             }
             Basis::Bones { .. } => {
                 self.fill(vi, set, b);
                 for (t, o) in out.iter_mut().enumerate() {
-                    *o = b[t * q..(t + 1) * q].iter().zip(y).map(|(a, c)| a * c).sum();
+                    *o = b[t * q..(t + 1) * q]
+                        .iter()
+                        .zip(y)
+                        .map(|(a, c)| a * c)
+                        .sum();
                 }
             }
         }
@@ -665,7 +678,10 @@ impl Problem<'_> {
             }
             Basis::Bones { b, q, .. } => {
                 let q = *q;
-                let (bv, bu) = (&b[v * k * q..(v + 1) * k * q], &b[u * k * q..(u + 1) * k * q]);
+                let (bv, bu) = (
+                    &b[v * k * q..(v + 1) * k * q],
+                    &b[u * k * q..(u + 1) * k * q],
+                );
                 for t in 0..k {
                     for s in 0..k {
                         c[t * k + s] = bv[t * q..(t + 1) * q]
@@ -734,24 +750,33 @@ impl Problem<'_> {
 
     /// `E = X(alpha) - Xbar`, flat `(n, q)`.
     fn error(&self, alpha: ArrayView2<f64>) -> Vec<f64> {
-        let n = self.sets.nrows();
         let q = self.basis.q();
-        let k = self.k();
-        let mut e = vec![0.0; n * q];
-        e.par_chunks_mut(q).enumerate().for_each_init(
-            || vec![0.0; k * q],
-            |b, (vi, ev)| {
-                let set = self.sets.row(vi);
-                let set = set.as_slice().expect("sets are standard layout");
-                let a = alpha.row(vi);
-                let a = a.as_slice().expect("weights are standard layout");
-                self.basis.position(vi, set, a, b, ev);
-                for (x, t) in ev.iter_mut().zip(self.target.row(vi)) {
-                    *x -= t;
-                }
-            },
-        );
+        let mut e = vec![0.0; self.sets.nrows() * q];
+        self.per_vertex(&mut e, q, |v, set, b, ev| {
+            let a = alpha.row(v);
+            let a = a.as_slice().expect("weights are standard layout");
+            self.basis.position(v, set, a, b, ev);
+            for (x, t) in ev.iter_mut().zip(self.target.row(v)) {
+                *x -= t;
+            }
+        });
         e
+    }
+
+    /// Runs `f(v, S_v, scratch (k q), out_v)` for every vertex in parallel, `out` split into
+    /// rows of `width`.
+    fn per_vertex<F>(&self, out: &mut [f64], width: usize, f: F)
+    where
+        F: Fn(usize, &[usize], &mut [f64], &mut [f64]) + Sync,
+    {
+        let kq = self.k() * self.basis.q();
+        out.par_chunks_mut(width).enumerate().for_each_init(
+            || vec![0.0; kq],
+            |b, (v, o)| {
+                let set = self.sets.row(v);
+                f(v, set.as_slice().expect("sets are standard layout"), b, o)
+            },
+        )
     }
 
     /// `tr(E^T Q E)`.
@@ -984,13 +1009,8 @@ impl Problem<'_> {
         let q = self.basis.q();
         let r_rows = self.rows();
         let mut e = self.error(alpha.view());
-        let f = self.objective(&e);
-        let mut history = vec![f];
-        progress.report(Event {
-            stage: "reduce",
-            iteration: 0,
-            value: f,
-        })?;
+        let mut history = Vec::new();
+        record(&mut history, self.objective(&e), progress)?;
         let capped = AtomicUsize::new(0);
         let mut converged = false;
         // Decoupled vertices: the exact block minimiser (no over-relaxation) in one sweep.
@@ -1022,15 +1042,8 @@ impl Problem<'_> {
                     .try_for_each_init(
                         || Scratch::new(k, q, r_rows),
                         |sc, (i, (ev, av))| -> SkinResult<()> {
-                            let conv = self.local_update(
-                                start + i,
-                                av,
-                                ev,
-                                &others,
-                                omega,
-                                fast,
-                                sc,
-                            )?;
+                            let conv =
+                                self.local_update(start + i, av, ev, &others, omega, fast, sc)?;
                             if !conv {
                                 capped.fetch_add(1, Ordering::Relaxed);
                             }
@@ -1042,13 +1055,7 @@ impl Problem<'_> {
             if sweep % 16 == 0 {
                 e = self.error(alpha.view());
             }
-            let f_new = self.objective(&e);
-            history.push(f_new);
-            progress.report(Event {
-                stage: "reduce",
-                iteration: sweep,
-                value: f_new,
-            })?;
+            record(&mut history, self.objective(&e), progress)?;
             if decoupled || should_stop(&history, opts.tol) {
                 converged = true;
                 break;
@@ -1106,14 +1113,9 @@ impl Problem<'_> {
         };
         // y_v = B_v^T x_v for every vertex (x (n, q) -> y (n, k)).
         let gather = |x: &[f64], y: &mut [f64]| {
-            y.par_chunks_mut(k).enumerate().for_each_init(
-                || vec![0.0; k * q],
-                |b, (v, yv)| {
-                    let set = self.sets.row(v);
-                    let set = set.as_slice().expect("sets are standard layout");
-                    self.basis.transpose(v, set, &x[v * q..(v + 1) * q], b, yv);
-                },
-            )
+            self.per_vertex(y, k, |v, set, b, yv| {
+                self.basis.transpose(v, set, &x[v * q..(v + 1) * q], b, yv)
+            })
         };
         // Two-level preconditioner (see `coarse`): z_v = P_v g_v, plus Z H_c^-1 Z^T g.
         let coarse = if self.rows() == 1 {
@@ -1126,7 +1128,11 @@ impl Problem<'_> {
                 let pv = &fast.p[v * k * k..(v + 1) * k * k];
                 let gv = &g[v * k..(v + 1) * k];
                 for (i, zi) in zv.iter_mut().enumerate() {
-                    *zi = pv[i * k..(i + 1) * k].iter().zip(gv).map(|(x, y)| x * y).sum();
+                    *zi = pv[i * k..(i + 1) * k]
+                        .iter()
+                        .zip(gv)
+                        .map(|(x, y)| x * y)
+                        .sum();
                 }
             });
             if let Some(c) = &coarse {
@@ -1139,7 +1145,11 @@ impl Problem<'_> {
         // the dense `E, R (n, m)` are never formed. The other bases keep `E = X - Xbar` and
         // `R = Q E` (q is small) and measure `Phi = tr(E^T R)` directly.
         let select = matches!(self.basis, Basis::Select { .. });
-        let slots = if select { self.shared_slots() } else { Vec::new() };
+        let slots = if select {
+            self.shared_slots()
+        } else {
+            Vec::new()
+        };
         let hess_select = |p: &[f64], hp: &mut [f64]| {
             let c = &self.coupling;
             hp.par_chunks_mut(k).enumerate().for_each(|(v, h)| {
@@ -1173,7 +1183,9 @@ impl Problem<'_> {
             if select {
                 hess_select(a, g);
                 let f = dot(a, g) - 2.0 * dot(a, &b0) + c0;
-                g.par_iter_mut().zip(b0.par_iter()).for_each(|(x, y)| *x -= y);
+                g.par_iter_mut()
+                    .zip(b0.par_iter())
+                    .for_each(|(x, y)| *x -= y);
                 f
             } else {
                 *e = self.error(alpha_view(a, n, k));
@@ -1184,12 +1196,8 @@ impl Problem<'_> {
             }
         };
         let mut f = measure(a, &mut g, &mut e, &mut r);
-        let mut history = vec![f];
-        progress.report(Event {
-            stage: "reduce",
-            iteration: 0,
-            value: f,
-        })?;
+        let mut history = Vec::new();
+        record(&mut history, f, progress)?;
         let mut z = vec![0.0; n * k];
         precondition(&g, &mut z);
         let mut p: Vec<f64> = z.iter().map(|x| -x).collect();
@@ -1209,14 +1217,9 @@ impl Problem<'_> {
                 hess_select(&p, &mut hp);
             } else {
                 // D = B p, W = Q D, Hp = B^T W + eps p.
-                d.par_chunks_mut(q).enumerate().for_each_init(
-                    || vec![0.0; k * q],
-                    |b, (v, dv)| {
-                        let set = self.sets.row(v);
-                        let set = set.as_slice().expect("sets are standard layout");
-                        self.basis.position(v, set, &p[v * k..(v + 1) * k], b, dv);
-                    },
-                );
+                self.per_vertex(&mut d, q, |v, set, b, dv| {
+                    self.basis.position(v, set, &p[v * k..(v + 1) * k], b, dv)
+                });
                 self.coupling.apply(&d, q, &mut w);
                 gather(&w, &mut hp);
                 hp.par_chunks_mut(k)
@@ -1234,8 +1237,8 @@ impl Problem<'_> {
             }
             // Exact line search along p.
             let t = -gp / php;
-            a.par_iter_mut().zip(p.par_iter()).for_each(|(x, y)| *x += t * y);
-            g.par_iter_mut().zip(hp.par_iter()).for_each(|(x, y)| *x += t * y);
+            axpy(t, &p, a);
+            axpy(t, &hp, &mut g);
             if it % 32 == 0 {
                 // Against rounding drift: measure from scratch now and then.
                 f = measure(a, &mut g, &mut e, &mut r);
@@ -1243,16 +1246,11 @@ impl Problem<'_> {
                 // Phi(alpha + t p) = Phi + 2 t g.p + t^2 p.Hp = Phi + t g.p (g, H halved).
                 f += t * gp;
             } else {
-                e.par_iter_mut().zip(d.par_iter()).for_each(|(x, y)| *x += t * y);
-                r.par_iter_mut().zip(w.par_iter()).for_each(|(x, y)| *x += t * y);
+                axpy(t, &d, &mut e);
+                axpy(t, &w, &mut r);
                 f = dot(&e, &r);
             }
-            history.push(f);
-            progress.report(Event {
-                stage: "reduce",
-                iteration: it,
-                value: f,
-            })?;
+            record(&mut history, f, progress)?;
             if should_stop(&history, opts.tol) {
                 converged = true;
                 break;
@@ -1261,11 +1259,13 @@ impl Problem<'_> {
             let gz_new = dot(&g, &z);
             let beta = gz_new / gz;
             gz = gz_new;
-            if !(gz > 0.0) {
+            if gz.is_nan() || gz <= 0.0 {
                 converged = true;
                 break;
             }
-            p.par_iter_mut().zip(z.par_iter()).for_each(|(x, y)| *x = beta * *x - y);
+            p.par_iter_mut()
+                .zip(z.par_iter())
+                .for_each(|(x, y)| *x = beta * *x - y);
         }
         // Put every row exactly back on sum one (each step moves it by rounding only).
         a.par_chunks_mut(k).for_each(|av| {
@@ -1283,6 +1283,23 @@ impl Problem<'_> {
             qp_capped: 0,
         })
     }
+}
+
+/// `y += t x`, in parallel.
+fn axpy(t: f64, x: &[f64], y: &mut [f64]) {
+    y.par_iter_mut()
+        .zip(x.par_iter())
+        .for_each(|(y, x)| *y += t * x);
+}
+
+/// Appends the objective after a sweep (or the start) and reports it as progress.
+fn record(history: &mut Vec<f64>, f: f64, progress: &mut dyn Progress) -> SkinResult<()> {
+    history.push(f);
+    progress.report(Event {
+        stage: "reduce",
+        iteration: history.len() - 1,
+        value: f,
+    })
 }
 
 /// `(n, k)` view of the flat weights.
