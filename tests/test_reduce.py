@@ -231,14 +231,17 @@ def check_constraints(W, I, A, k, nonneg):
         ("poisson", "laplacian"),
     ],
 )
-def test_k_equals_m_reproduces_every_example_pose(tube_rig, method, energy):
+@pytest.mark.parametrize("nonneg", [True, False])  # local iteration / conjugate gradients
+def test_k_equals_m_reproduces_every_example_pose(tube_rig, method, energy, nonneg):
     V, F, W, C, BE = tube_rig
     m = W.shape[1]
     T = bone_poses(C, BE, 4, seed=1)
     P = np.random.default_rng(2).normal(size=(3, m, 3))
     for kw in ({"bone_transforms": T}, {"control_points": P}):
-        I, A = skinrs.reduce_weights(W, m, method, V=V, F=F, energy=energy, **kw)
-        check_constraints(W, I, A, m, nonneg=True)
+        I, A = skinrs.reduce_weights(
+            W, m, method, V=V, F=F, energy=energy, nonnegative=nonneg, **kw
+        )
+        check_constraints(W, I, A, m, nonneg=nonneg)
         assert np.abs(deform(V, (I, A), **kw) - deform(V, W, **kw)).max() < 1e-8
 
 

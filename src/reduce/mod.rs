@@ -155,6 +155,9 @@ fn influence_sets(w: ArrayView2<f64>, k: usize) -> SkinResult<(Array2<usize>, Ar
             let row = &ws[v * m..(v + 1) * m];
             let mut len = 0;
             for (i, &x) in row.iter().enumerate() {
+                if !x.is_finite() {
+                    return Some((v, f64::NAN));
+                }
                 if len == k && x <= val[k - 1] {
                     continue; // ties keep the earlier (lower) index
                 }
@@ -175,10 +178,13 @@ fn influence_sets(w: ArrayView2<f64>, k: usize) -> SkinResult<(Array2<usize>, Ar
             val.iter_mut().for_each(|x| *x /= s);
             None
         });
-    if let Some((v, s)) = bad {
-        return invalid!("the k largest weights of W row {v} sum to {s}: cannot renormalise");
+    match bad {
+        Some((v, s)) if s.is_nan() => invalid!("W has a NaN or infinite entry (row {v})"),
+        Some((v, s)) => {
+            invalid!("the k largest weights of W row {v} sum to {s}: cannot renormalise")
+        }
+        None => Ok((sets, alpha)),
     }
-    Ok((sets, alpha))
 }
 
 /// Checks `W (n, m)` and `k`.
@@ -190,26 +196,25 @@ fn check_weights(w: ArrayView2<f64>, k: usize, method: Method) -> SkinResult<()>
     if k < 1 || k > m {
         return invalid!("k must be between 1 and the number of handles m = {m}, got {k}");
     }
+    if method == Method::KLargest {
+        return Ok(()); // `influence_sets` rejects non-finite entries in its single pass
+    }
     let ws = crate::skin::standard2(w);
     let ws = ws.as_slice().expect("standard layout");
-    if let Some(v) = ws
-        .par_chunks(m)
-        .position_first(|r| r.iter().any(|x| !x.is_finite()))
-    {
-        return invalid!("W has a NaN or infinite entry (row {v})");
-    }
-    if method != Method::KLargest {
-        for (v, row) in w.rows().into_iter().enumerate() {
-            let s: f64 = row.sum();
-            if (s - 1.0).abs() > POU_TOL {
-                return invalid!(
-                    "W row {v} sums to {s}, not 1 (tolerance {POU_TOL}); {method:?} reduction \
-                     needs partition-of-unity weights: normalise the rows first"
-                );
-            }
+    let bad = ws.par_chunks(m).enumerate().find_map_first(|(v, r)| {
+        let s: f64 = r.iter().sum();
+        (!s.is_finite() || (s - 1.0).abs() > POU_TOL).then_some((v, s))
+    });
+    match bad {
+        Some((v, _)) if ws[v * m..(v + 1) * m].iter().any(|x| !x.is_finite()) => {
+            invalid!("W has a NaN or infinite entry (row {v})")
         }
+        Some((v, s)) => invalid!(
+            "W row {v} sums to {s}, not 1 (tolerance {POU_TOL}); {method:?} reduction needs \
+             partition-of-unity weights: normalise the rows first"
+        ),
+        None => Ok(()),
     }
-    Ok(())
 }
 
 /// What the Laplacian methods need of `F (t, 3)` beyond [`operators::check_elements`]:
@@ -405,7 +410,10 @@ pub fn reduce_weights<'a>(
         }
     };
     let (basis, target) = match method {
-        Method::Smooth => (Basis::Select { m }, w_p(w).into_owned()),
+        Method::Smooth => (
+            Basis::Select { m },
+            w_p(w).as_standard_layout().into_owned(),
+        ),
         _ => {
             let p = *need(
                 poses,

@@ -783,7 +783,8 @@ impl Problem<'_> {
     fn objective(&self, e: &[f64]) -> f64 {
         let q = self.basis.q();
         let c = &self.coupling;
-        e.par_chunks(q)
+        let rows: Vec<f64> = e
+            .par_chunks(q)
             .enumerate()
             .map(|(v, ev)| {
                 let mut s = 0.0;
@@ -794,7 +795,8 @@ impl Problem<'_> {
                 }
                 s
             })
-            .sum()
+            .collect();
+        rows.iter().sum()
     }
 
     /// Updates vertex `vi` in place: `alpha_v (k)` and its error row `e_v (q)`, reading the rows
@@ -1105,11 +1107,14 @@ impl Problem<'_> {
                 },
             )
             .collect();
+        // Partial sums in a fixed order: results do not depend on the thread schedule.
         let dot = |x: &[f64], y: &[f64]| -> f64 {
-            x.par_chunks(4096)
+            let parts: Vec<f64> = x
+                .par_chunks(4096)
                 .zip(y.par_chunks(4096))
                 .map(|(a, b)| a.iter().zip(b).map(|(u, w)| u * w).sum::<f64>())
-                .sum()
+                .collect();
+            parts.iter().sum()
         };
         // y_v = B_v^T x_v for every vertex (x (n, q) -> y (n, k)).
         let gather = |x: &[f64], y: &mut [f64]| {
