@@ -133,7 +133,8 @@ const POU_TOL: f64 = 1e-6;
 
 /// Influence sets: the `k` largest weights of every row (ties to the lower index), in decreasing
 /// order, and those weights renormalised to sum to one (the k-largest reduction). One pass per
-/// row keeping the best `k` in a sorted buffer: most entries are rejected by one comparison.
+/// row keeping the best `k` in a sorted buffer: most entries are rejected by one comparison
+/// with the current k-th largest.
 fn influence_sets(w: ArrayView2<f64>, k: usize) -> SkinResult<(Array2<usize>, Array2<f64>)> {
     let (n, m) = w.dim();
     let ws = crate::skin::standard2(w);
@@ -153,14 +154,12 @@ fn influence_sets(w: ArrayView2<f64>, k: usize) -> SkinResult<(Array2<usize>, Ar
         .enumerate()
         .find_map_first(|(v, (idx, val))| {
             let row = &ws[v * m..(v + 1) * m];
-            let mut len = 0;
-            for (i, &x) in row.iter().enumerate() {
-                if !x.is_finite() {
-                    return Some((v, f64::NAN));
-                }
-                if len == k && x <= val[k - 1] {
-                    continue; // ties keep the earlier (lower) index
-                }
+            if !row.iter().fold(true, |ok, x| ok & x.is_finite()) {
+                return Some((v, f64::NAN));
+            }
+            // Insert `x` (handle `i`) into the sorted best `len` (shifting out the last when full);
+            // equal values stay behind the earlier, lower index.
+            let insert = |val: &mut [f64], idx: &mut [usize], len: usize, x: f64, i: usize| {
                 let mut p = len.min(k - 1);
                 while p > 0 && val[p - 1] < x {
                     val[p] = val[p - 1];
@@ -169,7 +168,16 @@ fn influence_sets(w: ArrayView2<f64>, k: usize) -> SkinResult<(Array2<usize>, Ar
                 }
                 val[p] = x;
                 idx[p] = i;
-                len = (len + 1).min(k);
+            };
+            for (i, &x) in row[..k].iter().enumerate() {
+                insert(val, idx, i, x, i);
+            }
+            let mut threshold = val[k - 1];
+            for (i, &x) in row.iter().enumerate().skip(k) {
+                if x > threshold {
+                    insert(val, idx, k, x, i);
+                    threshold = val[k - 1];
+                }
             }
             let s: f64 = val.iter().sum();
             if s.is_nan() || s <= 0.0 {
