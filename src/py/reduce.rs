@@ -26,6 +26,14 @@ fn poses<'a>(
     }
 }
 
+fn required_poses<'a>(
+    control_points: &'a Option<PyReadonlyArray3<'_, f64>>,
+    bone_transforms: &'a Option<PyReadonlyArray4<'_, f64>>,
+) -> PyResult<Poses<'a>> {
+    poses(control_points, bone_transforms)?
+        .ok_or_else(|| PyValueError::new_err("pass control_points or bone_transforms"))
+}
+
 fn usize_to_i64(a: Array2<usize>) -> Array2<i64> {
     a.mapv(|x| x as i64)
 }
@@ -120,8 +128,7 @@ fn reduce_deform<'py>(
     control_points: Option<PyReadonlyArray3<'py, f64>>,
     bone_transforms: Option<PyReadonlyArray4<'py, f64>>,
 ) -> PyResult<Bound<'py, PyArray3<f64>>> {
-    let p = poses(&control_points, &bone_transforms)?
-        .ok_or_else(|| PyValueError::new_err("pass control_points or bone_transforms"))?;
+    let p = required_poses(&control_points, &bone_transforms)?;
     let w = weights_view(&weights, &indices);
     let v = v.as_array();
     let x = py.detach(|| reduce::deform(v, &w, &p)).map_err(to_pyerr)?;
@@ -140,8 +147,7 @@ fn reduce_transform_normals<'py>(
     bone_transforms: Option<PyReadonlyArray4<'py, f64>>,
     c: Option<PyReadonlyArray2<'py, f64>>,
 ) -> PyResult<Bound<'py, PyArray3<f64>>> {
-    let p = poses(&control_points, &bone_transforms)?
-        .ok_or_else(|| PyValueError::new_err("pass control_points or bone_transforms"))?;
+    let p = required_poses(&control_points, &bone_transforms)?;
     let idx = index_array(&indices, p.handles(), "indices")?;
     let (nrm, w) = (normals.as_array(), weights.as_array());
     let c = c.as_ref().map(|c| c.as_array());

@@ -501,6 +501,27 @@ impl Scratch {
     }
 }
 
+impl Scratch {
+    /// Solves the local QP held in `h, g, e_mat, e_rhs` from the start `x0` into `x`.
+    fn solve_qp(&mut self, x0: &[f64], nonneg: bool) -> Result<qp::QpStatus, QpFailure> {
+        self.x.copy_from_slice(x0);
+        let qp = LocalQp {
+            h: &self.h,
+            g: &self.g,
+            e_mat: &self.e_mat,
+            e_rhs: &self.e_rhs,
+            nonneg,
+        };
+        qp::solve(
+            &qp,
+            &mut self.x,
+            &mut self.lambda,
+            &mut self.mu,
+            &mut self.work,
+        )
+    }
+}
+
 fn qp_error(v: usize, e: QpFailure) -> SkinError {
     match e {
         QpFailure::Infeasible => SkinError::InvalidInput(format!(
@@ -732,15 +753,7 @@ impl Problem<'_> {
                     sc.g[t] = -a[t];
                 }
                 self.equality(vi, &mut sc.e_mat, &mut sc.e_rhs);
-                sc.x.copy_from_slice(a);
-                let qp = LocalQp {
-                    h: &sc.h,
-                    g: &sc.g,
-                    e_mat: &sc.e_mat,
-                    e_rhs: &sc.e_rhs,
-                    nonneg: self.nonneg,
-                };
-                qp::solve(&qp, &mut sc.x, &mut sc.lambda, &mut sc.mu, &mut sc.work)
+                sc.solve_qp(a, self.nonneg)
                     .map_err(|e| qp_error(self.order[vi], e))?;
                 a.copy_from_slice(&sc.x);
                 Ok(())
@@ -878,15 +891,8 @@ impl Problem<'_> {
                 sc.g[a] -= ha;
             }
             self.equality(vi, &mut sc.e_mat, &mut sc.e_rhs);
-            sc.x.copy_from_slice(alpha_v);
-            let qp = LocalQp {
-                h: &sc.h,
-                g: &sc.g,
-                e_mat: &sc.e_mat,
-                e_rhs: &sc.e_rhs,
-                nonneg: self.nonneg,
-            };
-            converged = qp::solve(&qp, &mut sc.x, &mut sc.lambda, &mut sc.mu, &mut sc.work)
+            converged = sc
+                .solve_qp(alpha_v, self.nonneg)
                 .map_err(|e| qp_error(self.order[vi], e))?
                 .converged;
         }
