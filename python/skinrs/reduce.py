@@ -43,9 +43,12 @@ from ._checks import (
     positive_float,
     positive_int,
 )
+from .skinning import forward_kinematics as _fk
+from .skinning import per_vertex_normals
 
 METHODS = ("k-largest", "smooth", "geometric", "poisson")
 ENERGIES = ("gradient", "laplacian")
+SOLVERS = ("auto", "local", "cg")
 
 __all__ = [
     "METHODS",
@@ -66,12 +69,12 @@ __all__ = [
 class ReductionInfo:
     """How a reduction went.
 
-    objective : (s+1,) global objective before the first sweep and after each sweep
-        (empty for k-largest); never increases.
-    sweeps : number of sweeps run.
-    converged : whether a sweep lowered the objective by less than ``tol`` relative before
-        ``max_sweeps``.
-    colours : number of colour classes (parallel batches of one sweep).
+    objective : (s+1,) global objective before the first sweep and after each sweep or
+        conjugate-gradient iteration (empty for k-largest); never increases.
+    sweeps : number of sweeps (or iterations) run.
+    converged : whether the stopping rule (see ``tol``) was met before ``max_sweeps``.
+    colours : number of colour classes (parallel batches of one sweep); 0 when conjugate
+        gradients ran.
     qp_capped : local QPs that hit their active-set iteration cap (normally 0).
     nonnegative : the non-negativity setting used.
     """
@@ -182,6 +185,7 @@ def reduce_weights(
     tol=1e-4,
     relaxation=1.9,
     energy="gradient",
+    solver="auto",
     return_info=False,
     callback=None,
 ):
@@ -212,19 +216,35 @@ def reduce_weights(
         Keep every weight >= 0. Default: True for skeletons (``bone_transforms``) and whenever
         ``W`` has no negative entry (harmonic, BBW), False otherwise (e.g. mean value coordinates).
     max_sweeps : int
-        Upper bound on the sweeps of the local iteration.
+        Upper bound on the sweeps of the local iteration (or the iterations of conjugate
+        gradients).
     tol : float
-        Stop when one sweep lowers the global objective by less than ``tol`` times its value.
+        Stopping rule, measured on the global objective ``h`` (``h[0]`` at the k-largest start,
+        ``h[s]`` after sweep ``s``) and independent of its units: stop at the first sweep where
+        the mean decrease over the last (up to) 4 sweeps is at most ``tol * (h[0] - h[s])``,
+        i.e. the iteration has stopped making progress relative to what it has achieved.
     relaxation : float in (0, 2)
-        Over-relaxation of each per-vertex step (1 = plain block Gauss-Seidel as in the paper;
-        the default 1.9 needs several times fewer sweeps and reaches the same minimum).
+        Over-relaxation of each per-vertex step of the local iteration (1 = plain block
+        Gauss-Seidel as in the paper; the default 1.9 needs several times fewer sweeps and
+        reaches the same minimum).
     energy : {"gradient", "laplacian"}
         How smooth and Poisson compare functions on the surface. ``"gradient"`` (default):
         ``int |grad(phi - psi)|^2 dA``, the Poisson problem of Sec. 3.3 in its gradient form
         ``min int |grad phi - w|^2``; ``"laplacian"``: ``int (lap(phi - psi))^2 dA``, eqs. (4)-(5)
         as printed. The squared Laplacian barely penalises smooth (low-frequency) errors, so its
-        minimiser drifts away from the example poses and converges very slowly; on the rigs we
-        tried it gave larger normal errors than k-largest.
+        minimiser drifts away from the example poses and converges slowly. Measured on held-out
+        poses (7 fitting, 8 held-out random poses, seeds 1/2, non-negative weights), RMS normal
+        deviation / position error: hand-403 20 -> 4: gradient 0.0244 rad / 0.085 %, laplacian
+        0.0507 rad / 0.240 % (converged without bounds: 0.0597 / 0.295), k-largest 0.0278 /
+        0.059; arm 4 -> 2: gradient 0.0035 / 0.045, laplacian 0.0045 / 0.052, k-largest
+        0.0045 / 0.052. Hence the default.
+    solver : {"auto", "local", "cg"}
+        How coupled problems (smooth, Poisson) are minimised. ``"local"``: the local iteration
+        of Sec. 3.1 (per-vertex QPs over graph-colour classes in parallel, over-relaxed);
+        ``"cg"``: projected conjugate gradients preconditioned by the same per-vertex blocks plus
+        a coarse space (handle weight shifts on ~64-vertex aggregates), for ``nonnegative=False``
+        only; ``"auto"`` (default): ``"cg"`` without bounds, ``"local"`` with them. Both report the
+        objective after every sweep / iteration and reach the same minimiser.
     return_info : bool
         Also return a :class:`ReductionInfo` (objective per sweep, ...).
     callback : callable(stage, iteration, value) -> bool | None, optional
@@ -278,6 +298,8 @@ def reduce_weights(
     relaxation = positive_float(relaxation, "relaxation")
     if energy not in ENERGIES:
         raise ValueError(f"energy must be one of {ENERGIES}, got {energy!r}")
+    if solver not in SOLVERS:
+        raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
     I, A, obj, converged, colours, capped = _skinrs.reduce_weights(
         W,
         k,
@@ -292,6 +314,7 @@ def reduce_weights(
         tol,
         relaxation,
         energy,
+        solver,
         callback,
     )
     if not return_info:
@@ -345,10 +368,11 @@ def deform(V, W, *, control_points=None, bone_transforms=None):
     (p, n, d) deformed positions, or (n, d) when a single pose was given.
     """
     V = as_points(V, "V")
+    packed = isinstance(W, tuple)
     I, A, m = _packed(W, V.shape[0])
-    m = _handle_count(control_points, bone_transforms, m, isinstance(W, tuple))
+    m = _handle_count(control_points, bone_transforms, m, packed)
     P, T, single = _poses(control_points, bone_transforms, m, V.shape[1], required=True)
-    X = _skinrs.reduce_deform(V, I, A, P, T)
+    X = _skinrs.reduce_deform(V, A, I if packed else None, P, T)
     return X[0] if single else X
 
 
@@ -366,10 +390,9 @@ def _handle_count(control_points, bone_transforms, m: int, packed: bool) -> int:
 
 
 def vertex_normals(V, F):
-    """Area-weighted unit vertex normals ``(n, 3)`` of a 3D triangle mesh."""
-    V = as_points(V, "V", dims=(3,))
-    F = as_elements(F, V, "F", cols=3)
-    return _skinrs.reduce_vertex_normals(V, F)
+    """Area-weighted unit vertex normals ``(n, 3)`` of a 3D triangle mesh
+    (:func:`skinrs.per_vertex_normals`)."""
+    return per_vertex_normals(V, F)
 
 
 def transform_normals(N, reduced, *, control_points=None, bone_transforms=None, C=None):
@@ -450,15 +473,49 @@ def _bones(C, BE):
     return C, BE
 
 
+def _quaternions(R: np.ndarray) -> np.ndarray:
+    """Unit quaternions ``(w, x, y, z)`` of rotation matrices ``R (m, 3, 3)`` (Shepperd's method:
+    the largest of the four squared components is computed first, for accuracy)."""
+    t = np.trace(R, axis1=1, axis2=2)
+    d = np.stack([t, R[:, 0, 0], R[:, 1, 1], R[:, 2, 2]], axis=1)
+    Q = np.empty((len(R), 4))
+    for b, (Rb, c) in enumerate(zip(R, d.argmax(1))):
+        if c == 0:
+            w = 0.5 * np.sqrt(1 + t[b])
+            Q[b] = [
+                w,
+                *(
+                    np.array([Rb[2, 1] - Rb[1, 2], Rb[0, 2] - Rb[2, 0], Rb[1, 0] - Rb[0, 1]])
+                    / (4 * w)
+                ),
+            ]
+        else:
+            i = c - 1
+            j, k = (i + 1) % 3, (i + 2) % 3
+            x = 0.5 * np.sqrt(1 + Rb[i, i] - Rb[j, j] - Rb[k, k])
+            q = np.empty(4)
+            q[0] = (Rb[k, j] - Rb[j, k]) / (4 * x)
+            q[1 + i] = x
+            q[1 + j] = (Rb[j, i] + Rb[i, j]) / (4 * x)
+            q[1 + k] = (Rb[k, i] + Rb[i, k]) / (4 * x)
+            Q[b] = q
+    return Q
+
+
 def forward_kinematics(C, BE, R):
-    """Absolute bone transforms ``(m, 3, 4)`` from per-bone rotations ``R (m, 3, 3)``.
+    """Absolute bone transforms ``(m, 3, 4)`` from per-bone rotation matrices ``R (m, 3, 3)``.
 
     Bone ``b`` rotates about its head joint ``C[BE[b, 0]]`` and follows its parent bone (the one
-    ending at that joint): ``T_b = T_parent o [R_b | c - R_b c]``.
+    ending at that joint): ``T_b = T_parent o [R_b | c - R_b c]``. This is
+    :func:`skinrs.forward_kinematics` with the rotations given as matrices.
     """
-    C, BE = _bones(C, BE)
     R = _float_array(R, "R", 3)
-    return _skinrs.reduce_forward_kinematics(C, BE, R)
+    if R.shape[1:] != (3, 3):
+        raise ValueError(f"R must have shape (m, 3, 3), got {R.shape}")
+    err = np.abs(np.einsum("bij,bkj->bik", R, R) - np.eye(3)).max() if len(R) else 0.0
+    if err > 1e-6 or np.any(np.linalg.det(R) <= 0):
+        raise ValueError("R must hold rotation matrices (orthonormal, determinant +1)")
+    return _fk(C, BE, _quaternions(R))
 
 
 def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
@@ -514,5 +571,5 @@ def random_skeleton_poses(C, BE, n_poses, *, max_angle=np.pi / 6, max_twist=None
         R = np.stack(
             [_rotation(b, a) @ _rotation(d, t) for b, a, d, t in zip(bend, angles, axis, twists)]
         )
-        out[p] = _skinrs.reduce_forward_kinematics(C, BE, R)
+        out[p] = _fk(C, BE, _quaternions(R))
     return out

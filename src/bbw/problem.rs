@@ -3,14 +3,15 @@
 use std::time::Instant;
 
 use faer::linalg::solvers::Solve;
-use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
+use faer::sparse::linalg::solvers::Llt;
 use faer::sparse::Triplet;
-use faer::{MatMut, Side};
+use faer::MatMut;
 use ndarray::ArrayView2;
 use rayon::prelude::*;
 
 use crate::error::{SkinError, SkinResult};
 use crate::invalid;
+pub(crate) use crate::sparse::cholesky;
 use crate::sparse::{from_triplets, Csc};
 
 /// The BBW quadratic restricted to the free vertices.
@@ -201,13 +202,6 @@ impl EliminatedProblem {
         }
         w
     }
-}
-
-/// Sparse Cholesky factor of the SPD matrix `a` (its lower triangle is read), or why it failed.
-pub(crate) fn cholesky(a: &Csc) -> Result<Llt<usize, f64>, String> {
-    let symbolic = SymbolicLlt::try_new(a.symbolic(), Side::Lower)
-        .map_err(|e| format!("symbolic analysis: {e:?}"))?;
-    Llt::try_new_with_symbolic(symbolic, a.as_ref(), Side::Lower).map_err(|e| format!("{e:?}"))
 }
 
 /// Every connected component of the matrix graph must hold a constrained vertex, otherwise

@@ -10,6 +10,7 @@ use pyo3::prelude::*;
 
 use crate::error::{SkinError, SkinResult};
 use crate::progress::{Event, Progress};
+use crate::skin::Weights;
 use crate::sparse::Csc;
 
 mod bbw;
@@ -44,6 +45,21 @@ pub(crate) fn index_array(
         *o = x as usize;
     }
     Ok(out)
+}
+
+/// Skinning weights from the arrays of a binding: dense `w (n, m)`, or packed when the handle
+/// indices `index (n, k)` come with `w (n, k)` (their range is checked by the skinning code).
+pub(crate) fn weights_view<'a>(
+    w: &'a PyReadonlyArray2<'_, f64>,
+    index: &'a Option<PyReadonlyArray2<'_, i64>>,
+) -> Weights<'a> {
+    match index {
+        Some(i) => Weights::Packed {
+            index: i.as_array(),
+            weight: w.as_array(),
+        },
+        None => Weights::Dense(w.as_array()),
+    }
 }
 
 /// CSC parts `(data, indices, indptr, shape)` that the Python layer wraps in `scipy.sparse.csc_matrix`.

@@ -9,8 +9,8 @@ use numpy::{
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
-use super::{index_array, sparse_out, to_pyerr, PyProgress, SparseParts};
-use crate::reduce::{self, laplacian, qp, Energy, Method, Poses, ReduceOptions};
+use super::{index_array, to_pyerr, weights_view, PyProgress};
+use crate::reduce::{self, qp, Energy, Method, Poses, ReduceOptions, Solver};
 
 fn poses<'a>(
     control_points: &'a Option<PyReadonlyArray3<'_, f64>>,
@@ -24,6 +24,14 @@ fn poses<'a>(
         (None, Some(t)) => Ok(Some(Poses::Bones(t.as_array()))),
         (None, None) => Ok(None),
     }
+}
+
+fn required_poses<'a>(
+    control_points: &'a Option<PyReadonlyArray3<'_, f64>>,
+    bone_transforms: &'a Option<PyReadonlyArray4<'_, f64>>,
+) -> PyResult<Poses<'a>> {
+    poses(control_points, bone_transforms)?
+        .ok_or_else(|| PyValueError::new_err("pass control_points or bone_transforms"))
 }
 
 fn usize_to_i64(a: Array2<usize>) -> Array2<i64> {
@@ -43,7 +51,7 @@ type ReduceOut<'py> = (
 #[pyfunction]
 #[pyo3(signature = (w, k, method, v=None, f=None, control_points=None, bone_transforms=None,
                     c=None, nonnegative=false, max_sweeps=1000, tol=1e-4, relaxation=1.9,
-                    energy="gradient", callback=None))]
+                    energy="gradient", solver="auto", callback=None))]
 #[allow(clippy::too_many_arguments)]
 fn reduce_weights<'py>(
     py: Python<'py>,
@@ -60,10 +68,12 @@ fn reduce_weights<'py>(
     tol: f64,
     relaxation: f64,
     energy: &str,
+    solver: &str,
     callback: Option<Py<PyAny>>,
 ) -> PyResult<ReduceOut<'py>> {
     let method = Method::parse(method).map_err(to_pyerr)?;
     let energy = Energy::parse(energy).map_err(to_pyerr)?;
+    let solver = Solver::parse(solver).map_err(to_pyerr)?;
     let nv = v.as_ref().map_or(0, |v| v.as_array().nrows());
     let f = match &f {
         Some(f) => Some(index_array(f, nv, "F")?),
@@ -80,6 +90,7 @@ fn reduce_weights<'py>(
         tol,
         relaxation,
         energy,
+        solver,
     };
     let mut progress = PyProgress::new(callback);
     let r = py
@@ -106,38 +117,22 @@ fn reduce_weights<'py>(
     ))
 }
 
-/// Deformed positions `(p, n, d)` from packed weights.
+/// Deformed positions `(p, n, d)` from dense weights, or packed ones when `indices` is given.
 #[pyfunction]
-#[pyo3(signature = (v, indices, weights, control_points=None, bone_transforms=None))]
+#[pyo3(signature = (v, weights, indices=None, control_points=None, bone_transforms=None))]
 fn reduce_deform<'py>(
     py: Python<'py>,
     v: PyReadonlyArray2<'py, f64>,
-    indices: PyReadonlyArray2<'py, i64>,
     weights: PyReadonlyArray2<'py, f64>,
+    indices: Option<PyReadonlyArray2<'py, i64>>,
     control_points: Option<PyReadonlyArray3<'py, f64>>,
     bone_transforms: Option<PyReadonlyArray4<'py, f64>>,
 ) -> PyResult<Bound<'py, PyArray3<f64>>> {
-    let p = poses(&control_points, &bone_transforms)?
-        .ok_or_else(|| PyValueError::new_err("pass control_points or bone_transforms"))?;
-    let idx = index_array(&indices, p.handles(), "indices")?;
-    let (v, w) = (v.as_array(), weights.as_array());
-    let x = py
-        .detach(|| reduce::deform_packed(v, idx.view(), w, &p))
-        .map_err(to_pyerr)?;
-    Ok(x.into_pyarray(py))
-}
-
-/// Area-weighted unit vertex normals `(n, 3)`.
-#[pyfunction]
-fn reduce_vertex_normals<'py>(
-    py: Python<'py>,
-    v: PyReadonlyArray2<'py, f64>,
-    f: PyReadonlyArray2<'py, i64>,
-) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let p = required_poses(&control_points, &bone_transforms)?;
+    let w = weights_view(&weights, &indices);
     let v = v.as_array();
-    let f = index_array(&f, v.nrows(), "F")?;
-    let n = reduce::vertex_normals(v, f.view()).map_err(to_pyerr)?;
-    Ok(n.into_pyarray(py))
+    let x = py.detach(|| reduce::deform(v, &w, &p)).map_err(to_pyerr)?;
+    Ok(x.into_pyarray(py))
 }
 
 /// Approximate normal transform of paper 002 Sec. 5: `(p, n, 3)`.
@@ -152,8 +147,7 @@ fn reduce_transform_normals<'py>(
     bone_transforms: Option<PyReadonlyArray4<'py, f64>>,
     c: Option<PyReadonlyArray2<'py, f64>>,
 ) -> PyResult<Bound<'py, PyArray3<f64>>> {
-    let p = poses(&control_points, &bone_transforms)?
-        .ok_or_else(|| PyValueError::new_err("pass control_points or bone_transforms"))?;
+    let p = required_poses(&control_points, &bone_transforms)?;
     let idx = index_array(&indices, p.handles(), "indices")?;
     let (nrm, w) = (normals.as_array(), weights.as_array());
     let c = c.as_ref().map(|c| c.as_array());
@@ -183,34 +177,6 @@ fn reduce_deformation_errors<'py>(
         e.normal_rms,
         e.position_rms,
     ))
-}
-
-/// Forward kinematics: `(m, 3, 4)` absolute bone transforms from relative rotations `(m, 3, 3)`.
-#[pyfunction]
-fn reduce_forward_kinematics<'py>(
-    py: Python<'py>,
-    c: PyReadonlyArray2<'py, f64>,
-    be: PyReadonlyArray2<'py, i64>,
-    rotations: PyReadonlyArray3<'py, f64>,
-) -> PyResult<Bound<'py, PyArray3<f64>>> {
-    let c = c.as_array();
-    let be = index_array(&be, c.nrows(), "BE")?;
-    let t = reduce::forward_kinematics(c, be.view(), rotations.as_array()).map_err(to_pyerr)?;
-    Ok(t.into_pyarray(py))
-}
-
-/// Test hook: the private cotangent Laplacian (CSC parts) and barycentric mass.
-#[pyfunction]
-fn _reduce_cotan_laplacian<'py>(
-    py: Python<'py>,
-    v: PyReadonlyArray2<'py, f64>,
-    f: PyReadonlyArray2<'py, i64>,
-) -> PyResult<(SparseParts<'py>, Bound<'py, PyArray1<f64>>)> {
-    let v = v.as_array();
-    let f = index_array(&f, v.nrows(), "F")?;
-    let l = laplacian::cotan_laplacian(v, f.view()).map_err(to_pyerr)?;
-    let m = laplacian::barycentric_mass(v, f.view()).map_err(to_pyerr)?;
-    Ok((sparse_out(py, &l), m.into_pyarray(py)))
 }
 
 type QpOut<'py> = (
@@ -280,11 +246,8 @@ fn _reduce_local_qp<'py>(
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(reduce_weights, m)?)?;
     m.add_function(wrap_pyfunction!(reduce_deform, m)?)?;
-    m.add_function(wrap_pyfunction!(reduce_vertex_normals, m)?)?;
     m.add_function(wrap_pyfunction!(reduce_transform_normals, m)?)?;
     m.add_function(wrap_pyfunction!(reduce_deformation_errors, m)?)?;
-    m.add_function(wrap_pyfunction!(reduce_forward_kinematics, m)?)?;
-    m.add_function(wrap_pyfunction!(_reduce_cotan_laplacian, m)?)?;
     m.add_function(wrap_pyfunction!(_reduce_local_qp, m)?)?;
     Ok(())
 }

@@ -12,8 +12,8 @@ use numpy::{
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
-use super::{index_array, to_pyerr};
-use crate::skin::{self, Weights};
+use super::{index_array, to_pyerr, weights_view};
+use crate::skin;
 
 type Deformed<'py> = (Bound<'py, PyArray2<f64>>, Option<Bound<'py, PyArray2<f64>>>);
 
@@ -34,15 +34,9 @@ fn skin_any<'py>(
     N: Option<PyReadonlyArray2<'py, f64>>,
     out: Option<Bound<'py, PyArray2<f64>>>,
 ) -> PyResult<Deformed<'py>> {
-    let (v, w, t) = (V.as_array(), W.as_array(), T.as_array());
+    let (v, t) = (V.as_array(), T.as_array());
     let n = N.as_ref().map(|a| a.as_array());
-    let weights = match &index {
-        Some(i) => Weights::Packed {
-            index: i.as_array(),
-            weight: w,
-        },
-        None => Weights::Dense(w),
-    };
+    let weights = weights_view(&W, &index);
     let fresh = out.is_none();
     let out = match out {
         Some(o) => o,

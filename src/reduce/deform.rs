@@ -1,16 +1,23 @@
-//! Deformation by (packed) weights, per-vertex normals, the approximate normal transform of
-//! paper 002 Sec. 5, the error metrics of Sec. 6 and forward kinematics for random poses.
-//!
-//! The linear blend skinning here is a small private copy so weight reduction does not depend on
-//! the `skin` capability written concurrently; it is tested against gpytoolbox.
+//! Example poses, deformation by (packed) weights over all poses (the shared linear blend
+//! skinning of [`crate::skin`]), the approximate normal transform of paper 002 Sec. 5 and the
+//! error metrics of Sec. 6.
 
-use ndarray::{Array2, Array3, ArrayView2, ArrayView3, ArrayView4, Axis};
+use ndarray::{s, Array2, Array3, ArrayView2, ArrayView3, ArrayView4, Axis};
 use rayon::prelude::*;
 
 use crate::error::SkinResult;
 use crate::invalid;
+use crate::skin::quat::cross;
+use crate::skin::{lbs_into, lbs_with_normals, per_vertex_normals, Weights};
 
-use super::laplacian::point;
+/// Row `i` of `v`, zero-padded to 3D.
+pub(crate) fn point(v: ArrayView2<f64>, i: usize) -> [f64; 3] {
+    let mut x = [0.0; 3];
+    for (c, xc) in x.iter_mut().enumerate().take(v.ncols()) {
+        *xc = v[[i, c]];
+    }
+    x
+}
 
 /// Example poses of a rig: what every handle does in every pose.
 #[derive(Clone, Copy, Debug)]
@@ -118,95 +125,34 @@ pub(crate) fn check_packed(
     Ok(())
 }
 
-/// Deforms the rest vertices with packed weights: `x_v^j = sum_t w_vt q(v, idx_vt, j)`.
+/// The `(m, d, d + 1)` transforms of pose `j`: the bone transforms, or for a cage `[0 | c_i^j]`,
+/// with which linear blend skinning is the cage blend `sum_i w_i c_i^j` (eq. 1).
+fn pose_transforms(poses: &Poses, j: usize, d: usize) -> Array3<f64> {
+    match poses {
+        Poses::Bones(t) => t.index_axis(Axis(0), j).to_owned(),
+        Poses::ControlPoints(c) => {
+            let m = c.shape()[1];
+            let mut t = Array3::zeros((m, d, d + 1));
+            t.slice_mut(s![.., .., d]).assign(&c.index_axis(Axis(0), j));
+            t
+        }
+    }
+}
+
+/// Deforms the rest vertices over every pose: `x_v^j = sum_i w_vi q(v, i, j)` with
+/// `q = c_i^j` (cages) or `M_i^j v` (bones), by [`crate::skin::lbs_into`].
 ///
-/// Inputs: `v (n, d)` rest vertices; `idx (n, k)`, `w (n, k)` packed weights (dense weights are
-/// the case `idx = [0..m]` per row); `poses` for `m` handles.
-/// Output: `(p, n, d)` deformed positions.
-pub fn deform_packed(
-    v: ArrayView2<f64>,
-    idx: ArrayView2<usize>,
-    w: ArrayView2<f64>,
-    poses: &Poses,
-) -> SkinResult<Array3<f64>> {
+/// Inputs: `v (n, d)` rest vertices; `w` dense or packed weights over the `m` handles of
+/// `poses`. Output: `(p, n, d)` deformed positions.
+pub fn deform(v: ArrayView2<f64>, w: &Weights, poses: &Poses) -> SkinResult<Array3<f64>> {
     let (n, d) = v.dim();
     if !(2..=3).contains(&d) {
         return invalid!("V must have 2 or 3 columns, got {d}");
     }
-    if v.iter().any(|x| !x.is_finite()) {
-        return invalid!("V has a NaN or infinite entry");
-    }
-    let m = poses.handles();
-    poses.check(m, d)?;
-    check_packed(idx, w, n, m)?;
-    let p = poses.count();
-    let mut buf = vec![0.0; n * p * d];
-    buf.par_chunks_mut(p * d).enumerate().for_each(|(vi, out)| {
-        let x = point(v, vi);
-        let mut q = [0.0; 3];
-        for (&i, &wt) in idx.row(vi).iter().zip(w.row(vi).iter()) {
-            for j in 0..p {
-                poses.handle_point(j, i, &x, d, &mut q);
-                for a in 0..d {
-                    out[j * d + a] += wt * q[a];
-                }
-            }
-        }
-    });
-    let a = Array3::from_shape_vec((n, p, d), buf).expect("buffer has n*p*d entries");
-    Ok(a.permuted_axes([1, 0, 2]).as_standard_layout().into_owned())
-}
-
-fn cross(a: &[f64; 3], b: &[f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-
-fn normalize(x: &mut [f64; 3]) {
-    let l = (x[0] * x[0] + x[1] * x[1] + x[2] * x[2]).sqrt();
-    if l > 0.0 {
-        x.iter_mut().for_each(|c| *c /= l);
-    }
-}
-
-fn check_tris(f: ArrayView2<usize>, n: usize) -> SkinResult<()> {
-    if f.ncols() != 3 {
-        return invalid!("F must hold triangles (3 columns), got {}", f.ncols());
-    }
-    if let Some(bad) = f.iter().find(|&&i| i >= n) {
-        return invalid!("F holds index {bad}, outside 0..{n}");
-    }
-    Ok(())
-}
-
-/// Area-weighted unit vertex normals of a 3D triangle mesh (sum of the unnormalised face normals
-/// around each vertex). A vertex whose normals cancel or that no triangle uses gets `(0, 0, 0)`.
-///
-/// Inputs: `v (n, 3)`, `f (t, 3)`. Output: `(n, 3)`.
-pub fn vertex_normals(v: ArrayView2<f64>, f: ArrayView2<usize>) -> SkinResult<Array2<f64>> {
-    if v.ncols() != 3 {
-        return invalid!("normals need 3D vertices, V has {} columns", v.ncols());
-    }
-    check_tris(f, v.nrows())?;
-    let mut acc = vec![[0.0f64; 3]; v.nrows()];
-    for tri in f.rows() {
-        let (a, b, c) = (point(v, tri[0]), point(v, tri[1]), point(v, tri[2]));
-        let e1 = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
-        let e2 = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
-        let nf = cross(&e1, &e2);
-        for &i in tri.iter() {
-            for x in 0..3 {
-                acc[i][x] += nf[x];
-            }
-        }
-    }
-    let mut out = Array2::zeros((v.nrows(), 3));
-    for (mut row, mut a) in out.rows_mut().into_iter().zip(acc) {
-        normalize(&mut a);
-        row.assign(&ndarray::arr1(&a));
+    poses.check(poses.handles(), d)?;
+    let mut out = Array3::zeros((poses.count(), n, d));
+    for (j, x) in out.outer_iter_mut().enumerate() {
+        lbs_into(v, w, pose_transforms(poses, j, d).view(), None, x, None)?;
     }
     Ok(out)
 }
@@ -266,73 +212,69 @@ pub fn transform_normals(
     let m = poses.handles();
     poses.check(m, 3)?;
     check_packed(idx, w, n, m)?;
-    if let Poses::ControlPoints(_) = poses {
-        match rest {
-            None => {
-                return invalid!("normals of a cage deformation need the rest control points C")
-            }
-            Some(c) if c.dim() != (m, 3) => {
-                return invalid!("C must have shape ({m}, 3), got {:?}", c.dim())
-            }
-            Some(c) if c.iter().any(|x| !x.is_finite()) => {
-                return invalid!("C has a NaN or infinite entry")
-            }
-            _ => {}
-        }
-    }
     let p = poses.count();
+    let cp = match (poses, rest) {
+        (Poses::Bones(_), _) => {
+            // The cofactor transform of linear blend skinning with normals.
+            let index = idx.mapv(|i| i as i64);
+            let packed = Weights::Packed {
+                index: index.view(),
+                weight: w,
+            };
+            let mut out = Array3::zeros((p, n, 3));
+            for (j, mut o) in out.outer_iter_mut().enumerate() {
+                let t = pose_transforms(poses, j, 3);
+                o.assign(&lbs_with_normals(nrm, &packed, t.view(), nrm)?.1);
+            }
+            return Ok(out);
+        }
+        (Poses::ControlPoints(_), None) => {
+            return invalid!("normals of a cage deformation need the rest control points C")
+        }
+        (Poses::ControlPoints(_), Some(c)) if c.dim() != (m, 3) => {
+            return invalid!("C must have shape ({m}, 3), got {:?}", c.dim())
+        }
+        (Poses::ControlPoints(_), Some(c)) if c.iter().any(|x| !x.is_finite()) => {
+            return invalid!("C has a NaN or infinite entry")
+        }
+        (Poses::ControlPoints(cp), Some(c0)) => (cp, c0),
+    };
+    let (cp, c0) = cp;
     let mut buf = vec![0.0; n * p * 3];
     buf.par_chunks_mut(p * 3).enumerate().for_each(|(vi, out)| {
         let n0 = point(nrm, vi);
         let (ids, ws) = (idx.row(vi), w.row(vi));
         for j in 0..p {
-            let mut r = match poses {
-                Poses::Bones(t) => {
-                    let mut a = [[0.0; 3]; 3];
-                    for (&i, &wt) in ids.iter().zip(ws.iter()) {
-                        for (r, row) in a.iter_mut().enumerate() {
-                            for (c, x) in row.iter_mut().enumerate() {
-                                *x += wt * t[[j, i, r, c]];
-                            }
-                        }
-                    }
-                    // (adj A)^T n = cofactor(A) n = det(A) A^-T n
-                    let adj = adjugate3(&a);
-                    std::array::from_fn(|r| {
-                        adj[0][r] * n0[0] + adj[1][r] * n0[1] + adj[2][r] * n0[2]
-                    })
+            let (mut sw, mut cb, mut hb) = (0.0, [0.0; 3], [0.0; 3]);
+            for (&i, &wt) in ids.iter().zip(ws.iter()) {
+                let w2 = wt * wt;
+                sw += w2;
+                for a in 0..3 {
+                    cb[a] += w2 * c0[[i, a]];
+                    hb[a] += w2 * cp[[j, i, a]];
                 }
-                Poses::ControlPoints(cp) => {
-                    let c0 = rest.expect("checked above");
-                    let (mut sw, mut cb, mut hb) = (0.0, [0.0; 3], [0.0; 3]);
-                    for (&i, &wt) in ids.iter().zip(ws.iter()) {
-                        let w2 = wt * wt;
-                        sw += w2;
-                        for a in 0..3 {
-                            cb[a] += w2 * c0[[i, a]];
-                            hb[a] += w2 * cp[[j, i, a]];
-                        }
+            }
+            if sw > 0.0 {
+                cb.iter_mut().chain(hb.iter_mut()).for_each(|x| *x /= sw);
+            }
+            let (mut x, mut s) = ([[0.0; 3]; 3], [[0.0; 3]; 3]);
+            for (&i, &wt) in ids.iter().zip(ws.iter()) {
+                let w2 = wt * wt;
+                let dc: [f64; 3] = std::array::from_fn(|a| c0[[i, a]] - cb[a]);
+                let dh: [f64; 3] = std::array::from_fn(|a| cp[[j, i, a]] - hb[a]);
+                for a in 0..3 {
+                    for b in 0..3 {
+                        x[a][b] += w2 * dc[a] * dh[b];
+                        s[a][b] += w2 * dc[a] * dc[b];
                     }
-                    if sw > 0.0 {
-                        cb.iter_mut().chain(hb.iter_mut()).for_each(|x| *x /= sw);
-                    }
-                    let (mut x, mut s) = ([[0.0; 3]; 3], [[0.0; 3]; 3]);
-                    for (&i, &wt) in ids.iter().zip(ws.iter()) {
-                        let w2 = wt * wt;
-                        let dc: [f64; 3] = std::array::from_fn(|a| c0[[i, a]] - cb[a]);
-                        let dh: [f64; 3] = std::array::from_fn(|a| cp[[j, i, a]] - hb[a]);
-                        for a in 0..3 {
-                            for b in 0..3 {
-                                x[a][b] += w2 * dc[a] * dh[b];
-                                s[a][b] += w2 * dc[a] * dc[b];
-                            }
-                        }
-                    }
-                    matvec3(&adjugate3(&x), &matvec3(&s, &n0))
                 }
-            };
-            normalize(&mut r);
-            out[j * 3..j * 3 + 3].copy_from_slice(&r);
+            }
+            let r = matvec3(&adjugate3(&x), &matvec3(&s, &n0));
+            let l = r.iter().map(|c| c * c).sum::<f64>().sqrt();
+            let inv = if l > 0.0 { 1.0 / l } else { 0.0 };
+            for a in 0..3 {
+                out[j * 3 + a] = r[a] * inv;
+            }
         }
     });
     let a = Array3::from_shape_vec((n, p, 3), buf).expect("buffer has n*p*3 entries");
@@ -380,13 +322,15 @@ pub fn deformation_errors(
     if full.iter().chain(approx.iter()).any(|x| !x.is_finite()) {
         return invalid!("the animations have a NaN or infinite entry");
     }
-    check_tris(f, n)?;
+    if f.ncols() != 3 {
+        return invalid!("F must hold triangles (3 columns), got {}", f.ncols());
+    }
     let mut normal_angle = Array2::zeros((p, n));
     let mut normal_rms = Vec::with_capacity(p);
     let mut position_rms = Vec::with_capacity(p);
     for j in 0..p {
         let (a, b) = (full.index_axis(Axis(0), j), approx.index_axis(Axis(0), j));
-        let (na, nb) = (vertex_normals(a, f)?, vertex_normals(b, f)?);
+        let (na, nb) = (per_vertex_normals(a, f)?, per_vertex_normals(b, f)?);
         let mut sq = 0.0;
         for vi in 0..n {
             let t = angle(&point(na.view(), vi), &point(nb.view(), vi));
@@ -416,114 +360,6 @@ pub fn deformation_errors(
         normal_rms,
         position_rms,
     })
-}
-
-/// Parent bone of every bone (`None` for roots): the bone whose tail joint is this bone's head.
-fn bone_parents(be: ArrayView2<usize>, joints: usize) -> SkinResult<Vec<Option<usize>>> {
-    if be.ncols() != 2 {
-        return invalid!("BE must have shape (m, 2), got {:?}", be.dim());
-    }
-    let mut into = vec![None; joints];
-    for (b, e) in be.rows().into_iter().enumerate() {
-        if e[0] >= joints || e[1] >= joints {
-            return invalid!("BE row {b} holds a joint outside 0..{joints}");
-        }
-        if e[0] == e[1] {
-            return invalid!(
-                "BE row {b} is a zero-length bone (joint {} to itself)",
-                e[0]
-            );
-        }
-        if let Some(other) = into[e[1]] {
-            return invalid!(
-                "joint {} is the tail of bones {other} and {b}; BE must be a forest",
-                e[1]
-            );
-        }
-        into[e[1]] = Some(b);
-    }
-    Ok(be.rows().into_iter().map(|e| into[e[0]]).collect())
-}
-
-/// Forward kinematics: absolute affine transforms from relative bone rotations.
-///
-/// Bone `b` rotates by `rot_b` about its head joint `C[BE[b, 0]]` and then follows its parent
-/// (the bone ending at that joint): `T_b = T_parent o [R_b | c - R_b c]`.
-///
-/// Inputs: `c (j, 3)` rest joints; `be (m, 2)` bones (head, tail); `rot (m, 3, 3)` rotations.
-/// Output: `(m, 3, 4)` transforms `[A | t]`.
-pub fn forward_kinematics(
-    c: ArrayView2<f64>,
-    be: ArrayView2<usize>,
-    rot: ArrayView3<f64>,
-) -> SkinResult<Array3<f64>> {
-    if c.ncols() != 3 {
-        return invalid!("C must have shape (j, 3), got {:?}", c.dim());
-    }
-    let m = be.nrows();
-    if rot.dim() != (m, 3, 3) {
-        return invalid!("rotations must have shape ({m}, 3, 3), got {:?}", rot.dim());
-    }
-    if c.iter().chain(rot.iter()).any(|x| !x.is_finite()) {
-        return invalid!("C or the rotations have a NaN or infinite entry");
-    }
-    let parent = bone_parents(be, c.nrows())?;
-    let mut out = Array3::<f64>::zeros((m, 3, 4));
-    let mut done = vec![false; m];
-    for start in 0..m {
-        // Walk up to the first finished ancestor, then fill the chain top-down.
-        let mut chain = vec![start];
-        let mut b = start;
-        while let Some(pb) = parent[b] {
-            if done[pb] {
-                break;
-            }
-            if chain.len() > m {
-                return invalid!("BE has a cycle through bone {start}");
-            }
-            chain.push(pb);
-            b = pb;
-        }
-        for &b in chain.iter().rev() {
-            if done[b] {
-                continue;
-            }
-            let h = point(c, be[[b, 0]]);
-            // local = [R | h - R h]
-            let mut local = [[0.0; 4]; 3];
-            for r in 0..3 {
-                let mut rh = 0.0;
-                for k in 0..3 {
-                    local[r][k] = rot[[b, r, k]];
-                    rh += rot[[b, r, k]] * h[k];
-                }
-                local[r][3] = h[r] - rh;
-            }
-            let glob = match parent[b] {
-                None => local,
-                Some(pb) => {
-                    let mut g = [[0.0; 4]; 3];
-                    for r in 0..3 {
-                        for k in 0..4 {
-                            let mut s = if k == 3 { out[[pb, r, 3]] } else { 0.0 };
-                            for l in 0..3 {
-                                s += out[[pb, r, l]] * local[l][k];
-                            }
-                            g[r][k] = s;
-                        }
-                    }
-                    g
-                }
-            };
-            for r in 0..3 {
-                for k in 0..4 {
-                    out[[b, r, k]] = glob[r][k];
-                }
-            }
-            done[b] = true;
-        }
-    }
-    Ok(out)
 }
 
 #[cfg(test)]

@@ -3,28 +3,28 @@
 //!
 //! - [`reduce_weights`]: the k-largest baseline, smooth (Sec. 3.1), geometric (3.2, eq. 3) and
 //!   Poisson (3.3, eq. 5) reductions for cages (control points) and skeletons (Sec. 4), solved by
-//!   the parallel local iteration of Sec. 3.1 ([`solver`]) with exact per-vertex QPs ([`qp`]).
-//! - [`deform_packed`], [`transform_normals`] (Sec. 5), [`deformation_errors`] (Sec. 6) and
-//!   [`forward_kinematics`] for example poses.
+//!   the parallel local iteration of Sec. 3.1 ([`solver`]) with exact per-vertex QPs ([`qp`]),
+//!   or without bounds by preconditioned conjugate gradients ([`solver`], [`coarse`]).
+//! - [`deform`] (the shared linear blend skinning over all example poses),
+//!   [`transform_normals`] (Sec. 5) and [`deformation_errors`] (Sec. 6).
 
 #![allow(clippy::needless_range_loop)] // index loops mirror the formulas
 
+mod coarse;
 mod deform;
-pub(crate) mod laplacian;
 pub(crate) mod qp;
 mod solver;
 
-use ndarray::{Array2, ArrayView2, Axis};
+use ndarray::{Array2, ArrayView2, Axis, CowArray, Ix2};
 use rayon::prelude::*;
 
 use crate::error::SkinResult;
 use crate::invalid;
+use crate::operators::{self, MassKind};
 use crate::progress::Progress;
 
-pub use deform::{
-    deform_packed, deformation_errors, forward_kinematics, transform_normals, vertex_normals,
-    DeformationErrors, Poses,
-};
+pub use deform::{deform, deformation_errors, transform_normals, DeformationErrors, Poses};
+pub use solver::Solver;
 use solver::{Basis, Coupling, LinearPrecision, Problem, SolveOptions};
 
 /// Which weights to keep and how to set them.
@@ -86,12 +86,15 @@ pub struct ReduceOptions<'a> {
     pub rest_control_points: Option<ArrayView2<'a, f64>>,
     /// Upper bound on the sweeps of the local iteration.
     pub max_sweeps: usize,
-    /// Stop when a sweep lowers the objective by less than `tol` times its value.
+    /// Stop when the mean decrease of the objective over the last (up to 4) sweeps is at most
+    /// `tol` times its decrease since the start (see `solver::should_stop`).
     pub tol: f64,
     /// Over-relaxation factor of each block step, in (0, 2); 1 is plain block Gauss-Seidel.
     pub relaxation: f64,
     /// Energy of the smooth and Poisson methods.
     pub energy: Energy,
+    /// Iteration for coupled problems (smooth, Poisson).
+    pub solver: Solver,
 }
 
 impl Default for ReduceOptions<'_> {
@@ -103,6 +106,7 @@ impl Default for ReduceOptions<'_> {
             tol: 1e-4,
             relaxation: 1.9,
             energy: Energy::Gradient,
+            solver: Solver::Auto,
         }
     }
 }
@@ -118,7 +122,7 @@ pub struct Reduction {
     pub objective: Vec<f64>,
     /// Whether the stopping rule was met before `max_sweeps`.
     pub converged: bool,
-    /// Number of colour classes (parallel batches per sweep).
+    /// Number of colour classes (parallel batches per sweep); 0 when conjugate gradients ran.
     pub colours: usize,
     /// Local QPs that hit their iteration cap (left feasible, not optimal); normally 0.
     pub qp_capped: usize,
@@ -128,28 +132,67 @@ pub struct Reduction {
 const POU_TOL: f64 = 1e-6;
 
 /// Influence sets: the `k` largest weights of every row (ties to the lower index), in decreasing
-/// order.
-fn influence_sets(w: ArrayView2<f64>, k: usize) -> Array2<usize> {
+/// order, and those weights renormalised to sum to one (the k-largest reduction). One pass per
+/// row keeping the best `k` in a sorted buffer: most entries are rejected by one comparison
+/// with the current k-th largest.
+fn influence_sets(w: ArrayView2<f64>, k: usize) -> SkinResult<(Array2<usize>, Array2<f64>)> {
     let (n, m) = w.dim();
+    let ws = crate::skin::standard2(w);
+    let ws = ws.as_slice().expect("standard layout");
     let mut sets = Array2::<usize>::zeros((n, k));
-    sets.as_slice_mut()
+    let mut alpha = Array2::<f64>::zeros((n, k));
+    let bad = sets
+        .as_slice_mut()
         .expect("fresh array is contiguous")
         .par_chunks_mut(k)
+        .zip(
+            alpha
+                .as_slice_mut()
+                .expect("fresh array is contiguous")
+                .par_chunks_mut(k),
+        )
         .enumerate()
-        .for_each_init(
-            || (0..m).collect::<Vec<usize>>(),
-            |order, (v, out)| {
-                let row = w.row(v);
-                order.iter_mut().enumerate().for_each(|(i, o)| *o = i);
-                let cmp = |a: &usize, b: &usize| row[*b].total_cmp(&row[*a]).then(a.cmp(b));
-                if k < m {
-                    order.select_nth_unstable_by(k - 1, cmp);
+        .find_map_first(|(v, (idx, val))| {
+            let row = &ws[v * m..(v + 1) * m];
+            if !row.iter().fold(true, |ok, x| ok & x.is_finite()) {
+                return Some((v, f64::NAN));
+            }
+            // Insert `x` (handle `i`) into the sorted best `len` (shifting out the last when full);
+            // equal values stay behind the earlier, lower index.
+            let insert = |val: &mut [f64], idx: &mut [usize], len: usize, x: f64, i: usize| {
+                let mut p = len.min(k - 1);
+                while p > 0 && val[p - 1] < x {
+                    val[p] = val[p - 1];
+                    idx[p] = idx[p - 1];
+                    p -= 1;
                 }
-                order[..k].sort_by(cmp);
-                out.copy_from_slice(&order[..k]);
-            },
-        );
-    sets
+                val[p] = x;
+                idx[p] = i;
+            };
+            for (i, &x) in row[..k].iter().enumerate() {
+                insert(val, idx, i, x, i);
+            }
+            let mut threshold = val[k - 1];
+            for (i, &x) in row.iter().enumerate().skip(k) {
+                if x > threshold {
+                    insert(val, idx, k, x, i);
+                    threshold = val[k - 1];
+                }
+            }
+            let s: f64 = val.iter().sum();
+            if s.is_nan() || s <= 0.0 {
+                return Some((v, s));
+            }
+            val.iter_mut().for_each(|x| *x /= s);
+            None
+        });
+    match bad {
+        Some((v, s)) if s.is_nan() => invalid!("W has a NaN or infinite entry (row {v})"),
+        Some((v, s)) => {
+            invalid!("the k largest weights of W row {v} sum to {s}: cannot renormalise")
+        }
+        None => Ok((sets, alpha)),
+    }
 }
 
 /// Checks `W (n, m)` and `k`.
@@ -161,19 +204,55 @@ fn check_weights(w: ArrayView2<f64>, k: usize, method: Method) -> SkinResult<()>
     if k < 1 || k > m {
         return invalid!("k must be between 1 and the number of handles m = {m}, got {k}");
     }
-    if let Some(i) = w.iter().position(|x| !x.is_finite()) {
-        return invalid!("W has a NaN or infinite entry (row {})", i / m);
+    if method == Method::KLargest {
+        return Ok(()); // `influence_sets` rejects non-finite entries in its single pass
     }
-    if method != Method::KLargest {
-        for (v, row) in w.rows().into_iter().enumerate() {
-            let s: f64 = row.sum();
-            if (s - 1.0).abs() > POU_TOL {
-                return invalid!(
-                    "W row {v} sums to {s}, not 1 (tolerance {POU_TOL}); {method:?} reduction \
-                     needs partition-of-unity weights: normalise the rows first"
-                );
-            }
+    let ws = crate::skin::standard2(w);
+    let ws = ws.as_slice().expect("standard layout");
+    let bad = ws.par_chunks(m).enumerate().find_map_first(|(v, r)| {
+        let s: f64 = r.iter().sum();
+        (!s.is_finite() || (s - 1.0).abs() > POU_TOL).then_some((v, s))
+    });
+    match bad {
+        Some((v, _)) if ws[v * m..(v + 1) * m].iter().any(|x| !x.is_finite()) => {
+            invalid!("W has a NaN or infinite entry (row {v})")
         }
+        Some((v, s)) => invalid!(
+            "W row {v} sums to {s}, not 1 (tolerance {POU_TOL}); {method:?} reduction needs \
+             partition-of-unity weights: normalise the rows first"
+        ),
+        None => Ok(()),
+    }
+}
+
+/// What the Laplacian methods need of `F (t, 3)` beyond [`operators::check_elements`]:
+/// triangles, no repeated vertex in a triangle, every vertex used by some triangle (a vertex
+/// off the surface would have an empty Laplacian row and an undetermined weight).
+fn check_surface(n: usize, f: ArrayView2<usize>) -> SkinResult<()> {
+    if f.ncols() != 3 || f.nrows() == 0 {
+        return invalid!(
+            "F must hold at least one triangle (t, 3), got shape {:?}",
+            f.dim()
+        );
+    }
+    let mut used = vec![false; n];
+    for (t, tri) in f.rows().into_iter().enumerate() {
+        let (i, j, k) = (tri[0], tri[1], tri[2]);
+        if i >= n || j >= n || k >= n {
+            return invalid!("F row {t} holds an index outside 0..{n}");
+        }
+        if i == j || j == k || i == k {
+            return invalid!("F row {t} repeats a vertex: [{i}, {j}, {k}]");
+        }
+        used[i] = true;
+        used[j] = true;
+        used[k] = true;
+    }
+    if let Some(u) = used.iter().position(|&x| !x) {
+        return invalid!(
+            "V row {u} is not used by any triangle of F; the Laplacian-based methods need every \
+             vertex on the surface (drop unreferenced vertices and reindex F)"
+        );
     }
     Ok(())
 }
@@ -245,17 +324,7 @@ pub fn reduce_weights<'a>(
         );
     }
 
-    let sets = influence_sets(w, k);
-    let mut alpha = Array2::<f64>::zeros((n, k));
-    for vi in 0..n {
-        let s: f64 = sets.row(vi).iter().map(|&i| w[[vi, i]]).sum();
-        if s.is_nan() || s <= 0.0 {
-            return invalid!("the k largest weights of W row {vi} sum to {s}: cannot renormalise");
-        }
-        for (t, &i) in sets.row(vi).iter().enumerate() {
-            alpha[[vi, t]] = w[[vi, i]] / s;
-        }
-    }
+    let (sets, mut alpha) = influence_sets(w, k)?;
     if method == Method::KLargest {
         if opts.nonnegative {
             if let Some(i) = alpha.iter().position(|&a| a < 0.0) {
@@ -294,33 +363,72 @@ pub fn reduce_weights<'a>(
         _ => {
             let v = need(v, "the rest vertices V", method)?;
             let f = need(f, "the triangles F", method)?;
-            let l = laplacian::cotan_laplacian(v, f)?;
+            check_surface(v.nrows(), f)?;
+            let l = operators::cotan_laplacian(v, f)?;
             match opts.energy {
                 Energy::Gradient => Coupling::dirichlet(&l),
                 Energy::SquaredLaplacian => {
-                    let mass = laplacian::barycentric_mass(v, f)?;
+                    let mass = operators::massmatrix(v, f, MassKind::Barycentric)?;
                     Coupling::squared_laplacian(&l, &mass)
                 }
             }
         }
     };
-    // Renumber the vertices colour class by colour class (see `solver`).
-    let (order, classes) = coupling.colour_order();
-    let coupling = coupling.permuted(&order);
-    let rows = |a: ArrayView2<f64>| a.select(Axis(0), &order);
-    let sets_p = sets.select(Axis(0), &order);
-    let mut alpha_p = alpha.select(Axis(0), &order);
-    let w_p = rows(w);
-    let v_p = v.map(rows);
+    // The local iteration renumbers the vertices colour class by colour class (see `solver`);
+    // conjugate gradients keep the input order (better locality) and one class.
+    let use_cg = opts.solver != Solver::Local
+        && !opts.nonnegative
+        && method != Method::Geometric
+        && (method != Method::Smooth || k < u8::MAX as usize)
+        && (opts.solver == Solver::Cg || n.saturating_mul(k * k) <= solver::FAST_LIMIT);
+    if opts.solver == Solver::Cg && !use_cg {
+        return invalid!(
+            "solver='cg' needs nonnegative=False and a coupled method (smooth or poisson); \
+             use solver='local' or 'auto'"
+        );
+    }
+    // Conjugate gradients and decoupled vertices (geometric) need no colouring: input order.
+    let in_order = use_cg || method == Method::Geometric;
+    let (order, classes) = if in_order {
+        ((0..n).collect(), vec![0, n])
+    } else {
+        coupling.colour_order()
+    };
+    let (coupling, sets_p, mut alpha_p, v_p) = if in_order {
+        (
+            coupling,
+            sets.clone(),
+            alpha.clone(),
+            v.map(|v| v.to_owned()),
+        )
+    } else {
+        let rows = |a: ArrayView2<f64>| a.select(Axis(0), &order);
+        (
+            coupling.permuted(&order),
+            sets.select(Axis(0), &order),
+            alpha.select(Axis(0), &order),
+            v.map(rows),
+        )
+    };
+    let w_p = |w: ArrayView2<'a, f64>| -> CowArray<'a, f64, Ix2> {
+        if in_order {
+            CowArray::from(w)
+        } else {
+            CowArray::from(w.select(Axis(0), &order))
+        }
+    };
     let (basis, target) = match method {
-        Method::Smooth => (Basis::Select { m }, w_p),
+        Method::Smooth => (
+            Basis::Select { m },
+            w_p(w).as_standard_layout().into_owned(),
+        ),
         _ => {
             let p = *need(
                 poses,
                 "example poses (control_points or bone_transforms)",
                 method,
             )?;
-            pose_basis(w_p.view(), v_p.as_ref().map(|v| v.view()), p, &sets_p)?
+            pose_basis(w_p(w).view(), v_p.as_ref().map(|v| v.view()), p, &sets_p)?
         }
     };
     let lp = match (opts.rest_control_points, v_p) {
@@ -344,6 +452,7 @@ pub fn reduce_weights<'a>(
             max_sweeps: opts.max_sweeps,
             tol: opts.tol,
             relaxation: opts.relaxation,
+            cg: use_cg,
         },
         progress,
     )?;
@@ -355,7 +464,7 @@ pub fn reduce_weights<'a>(
         weights: alpha,
         objective: report.objective,
         converged: report.converged,
-        colours: problem.classes.len() - 1,
+        colours: if use_cg { 0 } else { problem.classes.len() - 1 },
         qp_capped: report.qp_capped,
     })
 }
@@ -390,8 +499,7 @@ fn pose_basis(
                 Some(v) => v,
                 None => return invalid!("bone_transforms need the rest vertices V"),
             };
-            let idx = Array2::from_shape_fn((n, m), |(_, i)| i);
-            let x = deform_packed(v, idx.view(), w, &poses)?;
+            let x = deform(v, &crate::skin::Weights::Dense(w), &poses)?;
             let d = v.ncols();
             // (p, n, d) -> (n, p * d)
             let target = Array2::from_shape_fn((n, p * d), |(vi, c)| x[[c / d, vi, c % d]]);

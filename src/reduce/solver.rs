@@ -20,8 +20,13 @@
 //! the squared Laplacian, > 1 for `-L`) do not interact, so a greedy colouring of `Q`'s graph gives
 //! classes that are updated in parallel; the sweep over all classes is block Gauss-Seidel,
 //! optionally over-relaxed. `E` and `R` are kept up to date, so the global objective is measured
-//! after every sweep and the iteration stops when a sweep decreases it by less than `tol`
-//! relative.
+//! after every sweep.
+//!
+//! Without bounds the problem is linear (one sparse KKT system), and [`Problem::solve_cg`]
+//! minimises it by projected conjugate gradients with the same per-vertex blocks as
+//! preconditioner plus an aggregation coarse space ([`super::coarse`]); it reports the
+//! objective after every iteration in the same way. Both stop by [`should_stop`]: when the
+//! mean decrease over the last few sweeps is at most `tol` times the decrease since the start.
 
 use ndarray::{Array2, ArrayView2};
 use rayon::prelude::*;
@@ -31,8 +36,8 @@ use crate::error::{SkinError, SkinResult};
 use crate::progress::{Event, Progress};
 use crate::sparse::Csc;
 
-use super::deform::Poses;
-use super::laplacian::point;
+use super::coarse::Coarse;
+use super::deform::{point, Poses};
 use super::qp::{self, LocalQp, QpFailure, QpWork};
 
 /// What a vertex's handles do over the example poses (the columns of `B_v`).
@@ -145,12 +150,54 @@ impl Basis {
                     x[i] += a;
                 }
             }
-            _ => {
+            Basis::Cage { cq, .. } => {
+                let cq = cq.as_slice().expect("cq is standard layout");
+                for (&i, &a) in set.iter().zip(alpha) {
+                    for (xc, bc) in x.iter_mut().zip(&cq[i * q..(i + 1) * q]) {
+                        *xc += a * bc;
+                    }
+                }
+            }
+            Basis::Bones { .. } => {
                 self.fill(vi, set, b);
                 for (t, &a) in alpha.iter().enumerate() {
                     for (xc, bc) in x.iter_mut().zip(&b[t * q..(t + 1) * q]) {
                         *xc += a * bc;
                     }
+                }
+            }
+        }
+    }
+}
+
+impl Basis {
+    /// `out = B_v^T y` for `y (q)` into `out (k)`; `b (k * q)` is scratch.
+    fn transpose(&self, vi: usize, set: &[usize], y: &[f64], b: &mut [f64], out: &mut [f64]) {
+        let q = self.q();
+        match self {
+            Basis::Select { .. } => {
+                for (o, &i) in out.iter_mut().zip(set) {
+                    *o = y[i];
+                }
+            }
+            Basis::Cage { cq, .. } => {
+                let cq = cq.as_slice().expect("cq is standard layout");
+                for (o, &i) in out.iter_mut().zip(set) {
+                    *o = cq[i * q..(i + 1) * q]
+                        .iter()
+                        .zip(y)
+                        .map(|(a, c)| a * c)
+                        .sum();
+                }
+            }
+            Basis::Bones { .. } => {
+                self.fill(vi, set, b);
+                for (t, o) in out.iter_mut().enumerate() {
+                    *o = b[t * q..(t + 1) * q]
+                        .iter()
+                        .zip(y)
+                        .map(|(a, c)| a * c)
+                        .sum();
                 }
             }
         }
@@ -257,6 +304,24 @@ impl Coupling {
         self.ptr[v]..self.ptr[v + 1]
     }
 
+    /// The entries `(u, Q_vu)` of row (= column) `v`.
+    pub(crate) fn entries(&self, v: usize) -> impl Iterator<Item = (usize, f64)> + '_ {
+        self.col(v).map(move |p| (self.rows[p], self.val[p]))
+    }
+
+    /// `out = Q x` for `x (n, q)` flat, in parallel over rows (`Q` is symmetric: columns = rows).
+    fn apply(&self, x: &[f64], q: usize, out: &mut [f64]) {
+        out.par_chunks_mut(q).enumerate().for_each(|(v, o)| {
+            o.iter_mut().for_each(|y| *y = 0.0);
+            for p in self.col(v) {
+                let (u, w) = (self.rows[p], self.val[p]);
+                for (y, xu) in o.iter_mut().zip(&x[u * q..(u + 1) * q]) {
+                    *y += w * xu;
+                }
+            }
+        });
+    }
+
     /// Greedy colouring such that no two vertices of one class are coupled by `Q`. Returns the
     /// vertices ordered class by class and the class boundaries (`ptr`, length classes + 1).
     pub(crate) fn colour_order(&self) -> (Vec<usize>, Vec<usize>) {
@@ -347,7 +412,53 @@ pub(crate) struct SolveOptions {
     pub max_sweeps: usize,
     pub tol: f64,
     pub relaxation: f64,
+    /// Conjugate gradients (vertices in input order, one class) instead of the local iteration.
+    pub cg: bool,
 }
+
+/// Which iteration minimises a coupled problem.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Solver {
+    /// Conjugate gradients when there are no bounds, the local iteration otherwise.
+    Auto,
+    /// The local iteration of Sec. 3.1 (block Gauss-Seidel / SOR over the colour classes).
+    Local,
+    /// Projected preconditioned conjugate gradients (equality constraints only).
+    Cg,
+}
+
+impl Solver {
+    /// Parses `"auto"`, `"local"` or `"cg"`.
+    pub fn parse(s: &str) -> SkinResult<Self> {
+        match s {
+            "auto" => Ok(Solver::Auto),
+            "local" => Ok(Solver::Local),
+            "cg" => Ok(Solver::Cg),
+            _ => crate::invalid!("unknown solver {s:?}: use 'auto', 'local' or 'cg'"),
+        }
+    }
+}
+
+/// The measured, scale-aware stopping rule: stop once the mean decrease of the objective over
+/// the last (up to) [`STOP_WINDOW`] iterations is at most `tol` times the decrease achieved since
+/// the start, `h[0] - h[s]`. Relative to what the iteration has achieved (not to `h[s]`, which
+/// may be near zero or dominated by an error no weight can remove), so it does not depend on the
+/// units of the poses; the window smooths the uneven decrease of conjugate gradients.
+pub(crate) fn should_stop(history: &[f64], tol: f64) -> bool {
+    let s = history.len() - 1;
+    if s == 0 {
+        return false;
+    }
+    let w = s.min(STOP_WINDOW);
+    let recent = (history[s - w] - history[s]) / w as f64;
+    recent <= tol * (history[0] - history[s])
+}
+
+/// Most entries of the per-vertex `k x k` blocks kept in memory (256 MB).
+pub(crate) const FAST_LIMIT: usize = 1 << 25;
+
+/// Iterations averaged by [`should_stop`].
+pub(crate) const STOP_WINDOW: usize = 4;
 
 pub(crate) struct SolveReport {
     /// Objective before the first sweep and after each sweep.
@@ -387,6 +498,27 @@ impl Scratch {
             mu: vec![0.0; k],
             work: QpWork::default(),
         }
+    }
+}
+
+impl Scratch {
+    /// Solves the local QP held in `h, g, e_mat, e_rhs` from the start `x0` into `x`.
+    fn solve_qp(&mut self, x0: &[f64], nonneg: bool) -> Result<qp::QpStatus, QpFailure> {
+        self.x.copy_from_slice(x0);
+        let qp = LocalQp {
+            h: &self.h,
+            g: &self.g,
+            e_mat: &self.e_mat,
+            e_rhs: &self.e_rhs,
+            nonneg,
+        };
+        qp::solve(
+            &qp,
+            &mut self.x,
+            &mut self.lambda,
+            &mut self.mu,
+            &mut self.work,
+        )
     }
 }
 
@@ -510,6 +642,80 @@ impl Problem<'_> {
         }
     }
 
+    /// For every coupling entry `(v, u)` (in storage order) and slot `t` of `v`: the slot of `u`
+    /// holding the same handle, or `u8::MAX` (smooth method; `k <= 254`).
+    fn shared_slots(&self) -> Vec<u8> {
+        let k = self.k();
+        let c = &self.coupling;
+        let mut out = vec![u8::MAX; c.rows.len() * k];
+        let n = self.sets.nrows();
+        let ptr = &c.ptr;
+        let chunks: Vec<(usize, &mut [u8])> = {
+            let mut v = Vec::with_capacity(n);
+            let mut rest: &mut [u8] = &mut out;
+            for col in 0..n {
+                let len = (ptr[col + 1] - ptr[col]) * k;
+                let (head, tail) = rest.split_at_mut(len);
+                v.push((col, head));
+                rest = tail;
+            }
+            v
+        };
+        chunks.into_par_iter().for_each(|(v, o)| {
+            let sv = self.sets.row(v);
+            for (x, pos) in c.col(v).enumerate() {
+                let su = self.sets.row(c.rows[pos]);
+                for (t, &i) in sv.iter().enumerate() {
+                    if let Some(sl) = su.iter().position(|&j| j == i) {
+                        o[x * k + t] = sl as u8;
+                    }
+                }
+            }
+        });
+        out
+    }
+
+    /// `c = B_v^T B_u (k x k)`, row-major.
+    pub(crate) fn cross_gram(&self, v: usize, u: usize, c: &mut [f64]) {
+        let k = self.k();
+        let (sv, su) = (self.sets.row(v), self.sets.row(u));
+        match &self.basis {
+            Basis::Cage { gram, .. } => {
+                let m = gram.ncols();
+                let gram = gram.as_slice().expect("gram is standard layout");
+                for (t, &i) in sv.iter().enumerate() {
+                    let row = &gram[i * m..(i + 1) * m];
+                    for (s, &j) in su.iter().enumerate() {
+                        c[t * k + s] = row[j];
+                    }
+                }
+            }
+            Basis::Select { .. } => {
+                for (t, &i) in sv.iter().enumerate() {
+                    for (s, &j) in su.iter().enumerate() {
+                        c[t * k + s] = (i == j) as u8 as f64;
+                    }
+                }
+            }
+            Basis::Bones { b, q, .. } => {
+                let q = *q;
+                let (bv, bu) = (
+                    &b[v * k * q..(v + 1) * k * q],
+                    &b[u * k * q..(u + 1) * k * q],
+                );
+                for t in 0..k {
+                    for s in 0..k {
+                        c[t * k + s] = bv[t * q..(t + 1) * q]
+                            .iter()
+                            .zip(&bu[s * q..(s + 1) * q])
+                            .map(|(x, y)| x * y)
+                            .sum();
+                    }
+                }
+            }
+        }
+    }
+
     fn feasible(&self, vi: usize, alpha: &[f64], sc: &mut Scratch) -> bool {
         if self.nonneg && alpha.iter().any(|&a| a < 0.0) {
             return false;
@@ -547,15 +753,7 @@ impl Problem<'_> {
                     sc.g[t] = -a[t];
                 }
                 self.equality(vi, &mut sc.e_mat, &mut sc.e_rhs);
-                sc.x.copy_from_slice(a);
-                let qp = LocalQp {
-                    h: &sc.h,
-                    g: &sc.g,
-                    e_mat: &sc.e_mat,
-                    e_rhs: &sc.e_rhs,
-                    nonneg: self.nonneg,
-                };
-                qp::solve(&qp, &mut sc.x, &mut sc.lambda, &mut sc.mu, &mut sc.work)
+                sc.solve_qp(a, self.nonneg)
                     .map_err(|e| qp_error(self.order[vi], e))?;
                 a.copy_from_slice(&sc.x);
                 Ok(())
@@ -564,32 +762,42 @@ impl Problem<'_> {
     }
 
     /// `E = X(alpha) - Xbar`, flat `(n, q)`.
-    fn error(&self, alpha: &Array2<f64>) -> Vec<f64> {
-        let n = self.sets.nrows();
+    fn error(&self, alpha: ArrayView2<f64>) -> Vec<f64> {
         let q = self.basis.q();
-        let k = self.k();
-        let mut e = vec![0.0; n * q];
-        e.par_chunks_mut(q).enumerate().for_each_init(
-            || vec![0.0; k * q],
-            |b, (vi, ev)| {
-                let set = self.sets.row(vi);
-                let set = set.as_slice().expect("sets are standard layout");
-                let a = alpha.row(vi);
-                let a = a.as_slice().expect("weights are standard layout");
-                self.basis.position(vi, set, a, b, ev);
-                for (x, t) in ev.iter_mut().zip(self.target.row(vi)) {
-                    *x -= t;
-                }
-            },
-        );
+        let mut e = vec![0.0; self.sets.nrows() * q];
+        self.per_vertex(&mut e, q, |v, set, b, ev| {
+            let a = alpha.row(v);
+            let a = a.as_slice().expect("weights are standard layout");
+            self.basis.position(v, set, a, b, ev);
+            for (x, t) in ev.iter_mut().zip(self.target.row(v)) {
+                *x -= t;
+            }
+        });
         e
+    }
+
+    /// Runs `f(v, S_v, scratch (k q), out_v)` for every vertex in parallel, `out` split into
+    /// rows of `width`.
+    fn per_vertex<F>(&self, out: &mut [f64], width: usize, f: F)
+    where
+        F: Fn(usize, &[usize], &mut [f64], &mut [f64]) + Sync,
+    {
+        let kq = self.k() * self.basis.q();
+        out.par_chunks_mut(width).enumerate().for_each_init(
+            || vec![0.0; kq],
+            |b, (v, o)| {
+                let set = self.sets.row(v);
+                f(v, set.as_slice().expect("sets are standard layout"), b, o)
+            },
+        )
     }
 
     /// `tr(E^T Q E)`.
     fn objective(&self, e: &[f64]) -> f64 {
         let q = self.basis.q();
         let c = &self.coupling;
-        e.par_chunks(q)
+        let rows: Vec<f64> = e
+            .par_chunks(q)
             .enumerate()
             .map(|(v, ev)| {
                 let mut s = 0.0;
@@ -600,7 +808,8 @@ impl Problem<'_> {
                 }
                 s
             })
-            .sum()
+            .collect();
+        rows.iter().sum()
     }
 
     /// Updates vertex `vi` in place: `alpha_v (k)` and its error row `e_v (q)`, reading the rows
@@ -682,15 +891,8 @@ impl Problem<'_> {
                 sc.g[a] -= ha;
             }
             self.equality(vi, &mut sc.e_mat, &mut sc.e_rhs);
-            sc.x.copy_from_slice(alpha_v);
-            let qp = LocalQp {
-                h: &sc.h,
-                g: &sc.g,
-                e_mat: &sc.e_mat,
-                e_rhs: &sc.e_rhs,
-                nonneg: self.nonneg,
-            };
-            converged = qp::solve(&qp, &mut sc.x, &mut sc.lambda, &mut sc.mu, &mut sc.work)
+            converged = sc
+                .solve_qp(alpha_v, self.nonneg)
                 .map_err(|e| qp_error(self.order[vi], e))?
                 .converged;
         }
@@ -744,12 +946,12 @@ impl Problem<'_> {
 
     /// Per-vertex projected inverses `P_v = H^-1 - H^-1 E^T (E H^-1 E^T)^-1 E H^-1`: with them
     /// an equality-constrained block step is one `k x k` product. `None` when they would take
-    /// more than ~128 MB (then every step runs the active-set QP).
+    /// more than [`FAST_LIMIT`] entries (then every step runs the active-set QP).
     fn fast_operators(&self) -> Option<FastOps> {
         let n = self.sets.nrows();
         let k = self.k();
         let r = self.rows();
-        if n.saturating_mul(k * k) > 1 << 24 {
+        if n.saturating_mul(k * k) > FAST_LIMIT {
             return None;
         }
         let mut p = vec![0.0; n * k * k];
@@ -770,29 +972,56 @@ impl Problem<'_> {
         Some(FastOps { p, ok })
     }
 
-    /// Runs the sweeps from the feasible start `alpha` (n, k), in place.
+    /// Minimises from the feasible start `alpha` (n, k), in place: one exact sweep when no two
+    /// vertices interact (geometric), projected conjugate gradients for coupled problems
+    /// without bounds ([`Solver::Auto`] / [`Solver::Cg`]), the local iteration otherwise.
     pub(crate) fn solve(
         &self,
         alpha: &mut Array2<f64>,
         opts: &SolveOptions,
         progress: &mut dyn Progress,
     ) -> SkinResult<SolveReport> {
+        let decoupled = self.coupling.is_diagonal();
+        // One exact sweep of decoupled vertices solves each local QP once: no blocks to reuse.
+        let fast = if decoupled {
+            None
+        } else {
+            self.fast_operators()
+        };
+        if !opts.cg {
+            return self.solve_local(alpha, opts, fast.as_ref(), decoupled, progress);
+        }
+        match &fast {
+            Some(f) => match f.ok.iter().position(|&x| !x) {
+                None => self.solve_cg(alpha, opts, f, progress),
+                Some(v) => Err(qp_error(self.order[v], QpFailure::DependentConstraints)),
+            },
+            None => Err(SkinError::InvalidInput(
+                "conjugate gradients need n k^2 <= 2^25 (memory for the per-vertex blocks); \
+                 use solver='local'"
+                    .into(),
+            )),
+        }
+    }
+
+    /// The local iteration of Sec. 3.1: sweeps over the colour classes, every class in parallel.
+    fn solve_local(
+        &self,
+        alpha: &mut Array2<f64>,
+        opts: &SolveOptions,
+        fast: Option<&FastOps>,
+        decoupled: bool,
+        progress: &mut dyn Progress,
+    ) -> SkinResult<SolveReport> {
         let k = self.k();
         let q = self.basis.q();
         let r_rows = self.rows();
-        let mut e = self.error(alpha);
-        let mut f = self.objective(&e);
-        let mut history = vec![f];
-        progress.report(Event {
-            stage: "reduce",
-            iteration: 0,
-            value: f,
-        })?;
+        let mut e = self.error(alpha.view());
+        let mut history = Vec::new();
+        record(&mut history, self.objective(&e), progress)?;
         let capped = AtomicUsize::new(0);
         let mut converged = false;
-        let fast = self.fast_operators();
         // Decoupled vertices: the exact block minimiser (no over-relaxation) in one sweep.
-        let decoupled = self.coupling.is_diagonal();
         let omega = if decoupled { 1.0 } else { opts.relaxation };
         let max_sweeps = if decoupled {
             opts.max_sweeps.min(1)
@@ -821,15 +1050,8 @@ impl Problem<'_> {
                     .try_for_each_init(
                         || Scratch::new(k, q, r_rows),
                         |sc, (i, (ev, av))| -> SkinResult<()> {
-                            let conv = self.local_update(
-                                start + i,
-                                av,
-                                ev,
-                                &others,
-                                omega,
-                                fast.as_ref(),
-                                sc,
-                            )?;
+                            let conv =
+                                self.local_update(start + i, av, ev, &others, omega, fast, sc)?;
                             if !conv {
                                 capped.fetch_add(1, Ordering::Relaxed);
                             }
@@ -839,18 +1061,10 @@ impl Problem<'_> {
             }
             // E is updated incrementally; refresh it now and then against rounding drift.
             if sweep % 16 == 0 {
-                e = self.error(alpha);
+                e = self.error(alpha.view());
             }
-            let f_new = self.objective(&e);
-            history.push(f_new);
-            progress.report(Event {
-                stage: "reduce",
-                iteration: sweep,
-                value: f_new,
-            })?;
-            let decrease = f - f_new;
-            f = f_new;
-            if decoupled || decrease <= opts.tol * (f + decrease) {
+            record(&mut history, self.objective(&e), progress)?;
+            if decoupled || should_stop(&history, opts.tol) {
                 converged = true;
                 break;
             }
@@ -861,4 +1075,245 @@ impl Problem<'_> {
             qp_capped: capped.into_inner(),
         })
     }
+    /// Projected preconditioned conjugate gradients for the problems without bounds.
+    ///
+    /// The objective is the quadratic `Phi(alpha) = tr(E^T Q E)`, `E = X(alpha) - Xbar`, under
+    /// the per-vertex equality rows `E_v alpha_v = e_v` only (sum to one, linear precision), so
+    /// its minimiser solves one sparse linear KKT system. The preconditioner is the block-diagonal
+    /// `P = diag(P_v)` of [`Problem::fast_operators`], the same `k x k` blocks the local iteration
+    /// uses: `P_v g` is the equality-constrained block step, and `E_v P_v = 0`, so every search
+    /// direction keeps the constraints (null-space PCG, Gould et al. 2001). Halving everything,
+    /// `grad_v = B_v^T (Q E)_v` and `(H d)_v = B_v^T (Q B d)_v + eps_v d_v` (the small `eps_v` of
+    /// [`Problem::local_hessian`] keeps `H` definite where the poses do not fix every weight).
+    /// Every step is an exact line search, so the objective never increases; it is reported
+    /// after every iteration, which plays the role of a sweep for `max_sweeps` and `tol`.
+    fn solve_cg(
+        &self,
+        alpha: &mut Array2<f64>,
+        opts: &SolveOptions,
+        fast: &FastOps,
+        progress: &mut dyn Progress,
+    ) -> SkinResult<SolveReport> {
+        let n = self.sets.nrows();
+        let k = self.k();
+        let q = self.basis.q();
+        let a = alpha
+            .as_slice_mut()
+            .ok_or_else(|| SkinError::Numerical("weights not contiguous".into()))?;
+        let eps: Vec<f64> = (0..n)
+            .into_par_iter()
+            .map_init(
+                || vec![0.0; k * k],
+                |g, v| {
+                    let set = self.sets.row(v);
+                    let set = set.as_slice().expect("sets are standard layout");
+                    self.basis.gram(v, set, g);
+                    let tr: f64 = (0..k).map(|t| g[t * k + t]).sum::<f64>() / k as f64;
+                    1e-9 * self.coupling.diag[v] * tr
+                },
+            )
+            .collect();
+        // Partial sums in a fixed order: results do not depend on the thread schedule.
+        let dot = |x: &[f64], y: &[f64]| -> f64 {
+            let parts: Vec<f64> = x
+                .par_chunks(4096)
+                .zip(y.par_chunks(4096))
+                .map(|(a, b)| a.iter().zip(b).map(|(u, w)| u * w).sum::<f64>())
+                .collect();
+            parts.iter().sum()
+        };
+        // y_v = B_v^T x_v for every vertex (x (n, q) -> y (n, k)).
+        let gather = |x: &[f64], y: &mut [f64]| {
+            self.per_vertex(y, k, |v, set, b, yv| {
+                self.basis.transpose(v, set, &x[v * q..(v + 1) * q], b, yv)
+            })
+        };
+        // Two-level preconditioner (see `coarse`): z_v = P_v g_v, plus Z H_c^-1 Z^T g.
+        let coarse = if self.rows() == 1 {
+            Some(Coarse::new(self)?)
+        } else {
+            None
+        };
+        let precondition = |g: &[f64], z: &mut [f64]| {
+            z.par_chunks_mut(k).enumerate().for_each(|(v, zv)| {
+                let pv = &fast.p[v * k * k..(v + 1) * k * k];
+                let gv = &g[v * k..(v + 1) * k];
+                for (i, zi) in zv.iter_mut().enumerate() {
+                    *zi = pv[i * k..(i + 1) * k]
+                        .iter()
+                        .zip(gv)
+                        .map(|(x, y)| x * y)
+                        .sum();
+                }
+            });
+            if let Some(c) = &coarse {
+                c.add_correction(g, z);
+            }
+        };
+        // The smooth method (`x_v` = the weight row, q = m) works on the weights alone:
+        // `(H p)_v[t] = sum_u Q_vu p_u[s]` over the slots `s` of u holding handle `S_vt`, with
+        // `Phi = alpha.H alpha - 2 alpha.b0 + c`, `b0 = B^T Q Xbar`, `c = tr(Xbar^T Q Xbar)`, so
+        // the dense `E, R (n, m)` are never formed. The other bases keep `E = X - Xbar` and
+        // `R = Q E` (q is small) and measure `Phi = tr(E^T R)` directly.
+        let select = matches!(self.basis, Basis::Select { .. });
+        let slots = if select {
+            self.shared_slots()
+        } else {
+            Vec::new()
+        };
+        let hess_select = |p: &[f64], hp: &mut [f64]| {
+            let c = &self.coupling;
+            hp.par_chunks_mut(k).enumerate().for_each(|(v, h)| {
+                h.iter_mut().for_each(|x| *x = 0.0);
+                for pos in c.col(v) {
+                    let (u, w) = (c.rows[pos], c.val[pos]);
+                    let pu = &p[u * k..(u + 1) * k];
+                    for (t, hv) in h.iter_mut().enumerate() {
+                        let sl = slots[pos * k + t];
+                        if sl != u8::MAX {
+                            *hv += w * pu[sl as usize];
+                        }
+                    }
+                }
+            });
+        };
+        let (mut e, mut r) = (Vec::new(), Vec::new());
+        let mut g = vec![0.0; n * k];
+        let (b0, c0) = if select {
+            let mut qx = vec![0.0; n * q];
+            let xbar = self.target.as_slice().expect("target is standard layout");
+            self.coupling.apply(xbar, q, &mut qx);
+            let mut b0 = vec![0.0; n * k];
+            gather(&qx, &mut b0);
+            (b0, dot(xbar, &qx))
+        } else {
+            (Vec::new(), 0.0)
+        };
+        // Objective and halved gradient g = B^T Q (X - Xbar) from alpha.
+        let measure = |a: &[f64], g: &mut [f64], e: &mut Vec<f64>, r: &mut Vec<f64>| {
+            if select {
+                hess_select(a, g);
+                let f = dot(a, g) - 2.0 * dot(a, &b0) + c0;
+                g.par_iter_mut()
+                    .zip(b0.par_iter())
+                    .for_each(|(x, y)| *x -= y);
+                f
+            } else {
+                *e = self.error(alpha_view(a, n, k));
+                r.resize(n * q, 0.0);
+                self.coupling.apply(e, q, r);
+                gather(r, g);
+                dot(e, r)
+            }
+        };
+        let mut f = measure(a, &mut g, &mut e, &mut r);
+        let mut history = Vec::new();
+        record(&mut history, f, progress)?;
+        let mut z = vec![0.0; n * k];
+        precondition(&g, &mut z);
+        let mut p: Vec<f64> = z.iter().map(|x| -x).collect();
+        let mut gz = dot(&g, &z);
+        let (mut d, mut w) = if select {
+            (Vec::new(), Vec::new())
+        } else {
+            (vec![0.0; n * q], vec![0.0; n * q])
+        };
+        let mut hp = vec![0.0; n * k];
+        let mut converged = gz <= 0.0;
+        for it in 1..=opts.max_sweeps {
+            if converged {
+                break;
+            }
+            if select {
+                hess_select(&p, &mut hp);
+            } else {
+                // D = B p, W = Q D, Hp = B^T W + eps p.
+                self.per_vertex(&mut d, q, |v, set, b, dv| {
+                    self.basis.position(v, set, &p[v * k..(v + 1) * k], b, dv)
+                });
+                self.coupling.apply(&d, q, &mut w);
+                gather(&w, &mut hp);
+                hp.par_chunks_mut(k)
+                    .zip(p.par_chunks(k))
+                    .zip(eps.par_iter())
+                    .for_each(|((h, pv), &ev)| {
+                        h.iter_mut().zip(pv).for_each(|(x, y)| *x += ev * y)
+                    });
+            }
+            let php = dot(&p, &hp);
+            let gp = dot(&g, &p);
+            if !(php > 0.0 && php.is_finite()) || gp >= 0.0 {
+                converged = true;
+                break;
+            }
+            // Exact line search along p.
+            let t = -gp / php;
+            axpy(t, &p, a);
+            axpy(t, &hp, &mut g);
+            if it % 32 == 0 {
+                // Against rounding drift: measure from scratch now and then.
+                f = measure(a, &mut g, &mut e, &mut r);
+            } else if select {
+                // Phi(alpha + t p) = Phi + 2 t g.p + t^2 p.Hp = Phi + t g.p (g, H halved).
+                f += t * gp;
+            } else {
+                axpy(t, &d, &mut e);
+                axpy(t, &w, &mut r);
+                f = dot(&e, &r);
+            }
+            record(&mut history, f, progress)?;
+            if should_stop(&history, opts.tol) {
+                converged = true;
+                break;
+            }
+            precondition(&g, &mut z);
+            let gz_new = dot(&g, &z);
+            let beta = gz_new / gz;
+            gz = gz_new;
+            if gz.is_nan() || gz <= 0.0 {
+                converged = true;
+                break;
+            }
+            p.par_iter_mut()
+                .zip(z.par_iter())
+                .for_each(|(x, y)| *x = beta * *x - y);
+        }
+        // Put every row exactly back on sum one (each step moves it by rounding only).
+        a.par_chunks_mut(k).for_each(|av| {
+            let shift = (av.iter().sum::<f64>() - 1.0) / k as f64;
+            av.iter_mut().for_each(|x| *x -= shift);
+        });
+        // The last entry is the objective of the returned weights, measured from scratch.
+        let f_end = measure(a, &mut g, &mut e, &mut r);
+        if let Some(last) = history.last_mut() {
+            *last = f_end;
+        }
+        Ok(SolveReport {
+            objective: history,
+            converged,
+            qp_capped: 0,
+        })
+    }
+}
+
+/// `y += t x`, in parallel.
+fn axpy(t: f64, x: &[f64], y: &mut [f64]) {
+    y.par_iter_mut()
+        .zip(x.par_iter())
+        .for_each(|(y, x)| *y += t * x);
+}
+
+/// Appends the objective after a sweep (or the start) and reports it as progress.
+fn record(history: &mut Vec<f64>, f: f64, progress: &mut dyn Progress) -> SkinResult<()> {
+    history.push(f);
+    progress.report(Event {
+        stage: "reduce",
+        iteration: history.len() - 1,
+        value: f,
+    })
+}
+
+/// `(n, k)` view of the flat weights.
+fn alpha_view(a: &[f64], n: usize, k: usize) -> ArrayView2<'_, f64> {
+    ArrayView2::from_shape((n, k), a).expect("n * k weights")
 }
