@@ -1,6 +1,6 @@
 """Regenerate the bounded-biharmonic-weights QP reference fixtures in this folder.
 
-    python tests/reference/make_qp_reference.py [case ...] [--seed=skinrs]  # default: all cases
+    python tests/reference/make_qp_reference.py [case ...]      # default: all cases
 
 For each case of ``tests/cases.py`` this writes ``tests/reference/<case>.npz`` holding the mesh,
 the skeleton, the boundary conditions ``b, bc`` (from ``cases.boundary_conditions``, an
@@ -402,7 +402,7 @@ def _version(mod):
         return "?"
 
 
-def make(name, data_dir=None, skip_qp=False, seed="igl", log=print):
+def make(name, data_dir=None, skip_qp=False, log=print):
     case = cases.build(name, data_dir)
     V, T = case["V"], case["T"]
     b, bc = cases.boundary_conditions(V, T, case["C"], case["P"], case["BE"])
@@ -428,28 +428,13 @@ def make(name, data_dir=None, skip_qp=False, seed="igl", log=print):
         # clarabel's interior point factors the coupled KKT of all m columns: on hand-403 it
         # needed over 30 min for 9 of its ~25 iterations on this 2-core machine. The exact
         # active set is seeded by libigl's bbw (no PoU, normalised), also independent of skinrs.
+        import igl
+
         t0 = time.perf_counter()
-        if seed == "skinrs":
-            # The seed only picks the first support. The result is certified by this script's
-            # own KKT solve (SciPy) and re-checked with libigl's operators in
-            # test_reference_fixtures, so it does not depend on skinrs being right; a wrong
-            # seed would only cost rounds. igl.bbw's seed needs 40+ rounds of ~40 s on big2d.
-            import skinrs
-
-            W_i, sinfo = skinrs.bbw_dual_constrained(
-                V, T, b, bc, tol=1e-9, mass="voronoi", return_info=True
-            )
-            seed_note = (
-                f"skinrs.bbw_dual_constrained tol 1e-9, {sinfo['rounds']} rounds (seed only)"
-            )
-        else:
-            import igl
-
-            W_i = igl.bbw(V, T, b, bc, max_iter=100)
-            seed_note = "igl.bbw max_iter 100"
-        log(f"[{name}] seed ({seed_note}) in {time.perf_counter() - t0:.1f}s")
+        W_i = igl.bbw(V, T, b, bc, max_iter=100)
+        log(f"[{name}] igl.bbw seed in {time.perf_counter() - t0:.1f}s")
         W, _v, pinfo = polish_schur(B, b, bc, W_i, log=log)
-        pinfo["seed"] = seed_note
+        pinfo["seed"] = "igl.bbw max_iter 100"
         info["polish"] = pinfo
         info["stored"] = "polish_schur" if pinfo["converged"] else "none (not converged)"
         if not pinfo["converged"]:
@@ -498,15 +483,13 @@ def make(name, data_dir=None, skip_qp=False, seed="igl", log=print):
 def main(argv=None):
     argv = list(sys.argv[1:] if argv is None else argv)
     skip = {a.split("=", 1)[1] for a in argv if a.startswith("--skip-qp=")}
-    seeds = [a.split("=", 1)[1] for a in argv if a.startswith("--seed=")]
-    seed = seeds[-1] if seeds else "igl"
     names = [a for a in argv if not a.startswith("--")] or CASES
     for name in names:
         if name not in cases.BUILDERS:
             print(f"unknown case {name}; choose from {list(cases.BUILDERS)}", file=sys.stderr)
             return 2
     for name in names:
-        make(name, skip_qp=name in skip, seed=seed, log=lambda s: print(s, flush=True))
+        make(name, skip_qp=name in skip, log=lambda s: print(s, flush=True))
     return 0
 
 
