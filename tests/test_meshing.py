@@ -335,3 +335,12 @@ def test_pytetwild_fallback_snaps_nearest_vertices_onto_bone_samples(crossing_tu
     moved = np.flatnonzero(np.any(vol["V"] != Vw, axis=1))
     assert set(moved) <= set(idx.tolist())
     assert np.array_equal(vol["V"][idx], S)
+
+
+def test_self_intersecting_surface_without_pytetwild_says_what_to_do(crossing_tubes, monkeypatch):
+    V, F, C, BE = crossing_tubes
+    monkeypatch.setitem(sys.modules, "pytetwild", None)
+    with pytest.raises(
+        ImportError, match=r"self-intersections.*pytetwild.*pip install skinrs\[mesh\].*repair"
+    ):
+        skinrs.mesh_with_skeleton(V, F, C, BE)
