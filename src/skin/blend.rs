@@ -325,7 +325,7 @@ pub(crate) mod avx {
     /// returns the first `(row, slot)` holding an index outside `0..m`, having written the rows
     /// before it.
     #[target_feature(enable = "avx2,fma")]
-    pub(crate) unsafe fn lbs_packed_rows<const G: usize>(
+    pub(crate) unsafe fn lbs_packed_rows<const G: usize, const K: usize>(
         idx: &[i64],
         w: &[f64],
         k: usize,
@@ -333,13 +333,19 @@ pub(crate) mod avx {
         x: &[f64],
         o: &mut [f64],
     ) -> Option<(usize, usize)> {
-        let rows = o.len() / G;
+        // `K > 0` fixes `k` at compile time (the common widths are instantiated by the caller):
+        // the slot loop is then unrolled and the row slices need no bounds checks.
+        let k = if K > 0 { K } else { k };
         let load = |t: &Lanes<G>, g: usize| {
             // SAFETY: `t[g]` is 4 contiguous f64.
             unsafe { _mm256_loadu_pd(t[g].as_ptr()) }
         };
-        for r in 0..rows {
-            let (ir, wr) = (&idx[r * k..][..k], &w[r * k..][..k]);
+        let rows = idx
+            .chunks_exact(k)
+            .zip(w.chunks_exact(k))
+            .zip(x.chunks_exact(G))
+            .zip(o.chunks_exact_mut(G));
+        for (r, (((ir, wr), xr), or)) in rows.enumerate() {
             // Two accumulators (even and odd slots), as in `scalar_blend`: two independent
             // chains of multiply-adds per row.
             let mut a0 = [_mm256_setzero_pd(); G];
@@ -373,7 +379,7 @@ pub(crate) mod avx {
                 a0[g] = _mm256_add_pd(a0[g], a1[g]);
             }
             // SAFETY: same target features as this function's.
-            unsafe { apply(&a0, &x[r * G..(r + 1) * G], &mut o[r * G..(r + 1) * G]) };
+            unsafe { apply(&a0, xr, or) };
         }
         None
     }

@@ -162,8 +162,19 @@ fn avx_rows<const D: usize>(
         Influences::Packed { idx, w, k } => {
             let rows = out.len() / D;
             let (ic, wc) = (&idx[first * k..(first + rows) * k], &w[first * k..]);
+            use super::blend::avx::lbs_packed_rows as rows_k;
             // SAFETY: only called on the AVX2/FMA path, after runtime detection.
-            let bad = unsafe { super::blend::avx::lbs_packed_rows::<D>(ic, wc, k, table, v, out) };
+            let bad = unsafe {
+                match k {
+                    1 => rows_k::<D, 1>(ic, wc, k, table, v, out),
+                    2 => rows_k::<D, 2>(ic, wc, k, table, v, out),
+                    3 => rows_k::<D, 3>(ic, wc, k, table, v, out),
+                    4 => rows_k::<D, 4>(ic, wc, k, table, v, out),
+                    6 => rows_k::<D, 6>(ic, wc, k, table, v, out),
+                    8 => rows_k::<D, 8>(ic, wc, k, table, v, out),
+                    _ => rows_k::<D, 0>(ic, wc, k, table, v, out),
+                }
+            };
             if let Some((r, s)) = bad {
                 return Err(ChunkError::BadIndex(first + r, s, ic[r * k + s]));
             }
