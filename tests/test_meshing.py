@@ -285,11 +285,14 @@ def _tubes_checks(V, F, C, BE, W, vol):
     assert np.all(W[far0].argmax(axis=1) == 0) and np.all(W[far1].argmax(axis=1) == 1)
 
 
-def test_tetgen_rejects_crossing_tubes_and_pytetwild_meshes_them(crossing_tubes):
+def test_tetgen_rejects_crossing_tubes_and_pytetwild_meshes_them(
+    crossing_tubes, tmp_path, monkeypatch
+):
     """Real fallback: TetGen refuses the self-intersecting surface, fTetWild repairs it, and
     TetGen meshes the repaired boundary with every bone sample inserted exactly."""
     import pytetwild  # noqa: F401 - installed by `make venv`; a missing package is a failure
 
+    monkeypatch.chdir(tmp_path)  # TetGen and fTetWild write scratch files here; none may stay
     V, F, C, BE = crossing_tubes
     assert meshing._self_intersects(V, F)
     with pytest.raises(RuntimeError, match="self-intersections"):
@@ -297,14 +300,18 @@ def test_tetgen_rejects_crossing_tubes_and_pytetwild_meshes_them(crossing_tubes)
     with pytest.warns(meshing.MeshingWarning, match="fTetWild's repaired surface"):
         W, vol = skinrs.skin_weights(V, F, C, BE, tol=1e-3, return_mesh=True)
     _tubes_checks(V, F, C, BE, W, vol)
+    assert list(tmp_path.iterdir()) == []
 
 
-def test_pytetwild_fallback_snaps_nearest_vertices_onto_bone_samples(crossing_tubes, monkeypatch):
+def test_pytetwild_fallback_snaps_nearest_vertices_onto_bone_samples(
+    crossing_tubes, tmp_path, monkeypatch
+):
     """Last resort, with the real fTetWild: when TetGen fails on the repaired boundary too, the
     nearest interior fTetWild vertices are moved onto the samples (no tet inverted), and the
     warning reports the snapping distance."""
     import pytetwild  # noqa: F401
 
+    monkeypatch.chdir(tmp_path)
     V, F, C, BE = crossing_tubes
 
     def refuses(*args, **kw):  # TetGen also refuses fTetWild's boundary
@@ -335,6 +342,7 @@ def test_pytetwild_fallback_snaps_nearest_vertices_onto_bone_samples(crossing_tu
     moved = np.flatnonzero(np.any(vol["V"] != Vw, axis=1))
     assert set(moved) <= set(idx.tolist())
     assert np.array_equal(vol["V"][idx], S)
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_self_intersecting_surface_without_pytetwild_says_what_to_do(crossing_tubes, monkeypatch):

@@ -170,6 +170,23 @@ def _quiet_fd1(quiet: bool):
         os.close(saved)
 
 
+# Files TetGen (on a self-intersecting surface) and fTetWild write into the working directory.
+_LITTER = ("tetgen-tmpfile_skipped.face", "tetgen-tmpfile_skipped.node", "__tracked_surface.stl")
+
+
+@contextlib.contextmanager
+def _no_litter():
+    """Removes the scratch files the meshers leave in the working directory (only those the
+    call created: a file of that name that was there before is left alone)."""
+    before = {f for f in _LITTER if os.path.exists(f)}
+    try:
+        yield
+    finally:
+        for f in set(_LITTER) - before:
+            with contextlib.suppress(OSError):
+                os.remove(f)
+
+
 def _import_tetgen():
     try:
         import tetgen
@@ -183,7 +200,7 @@ def _tetgen(V, F, S, flags: str, verbose: bool):
     if not verbose and "Q" not in flags:
         flags += "Q"
     pts = np.vstack([V, S])
-    with _quiet_fd1(not verbose):
+    with _quiet_fd1(not verbose), _no_litter():
         tg = tetgen.TetGen(pts, F.astype(np.int32))
         VV, TT = tg.tetrahedralize(switches=flags)[:2]
     # copies: the arrays may view memory owned by `tg`, freed when it goes away
@@ -198,7 +215,7 @@ def _self_intersects(V, F) -> bool:
     two overlapping tubes) instead of raising; on the bare surface the check raises cleanly."""
     tetgen = _import_tetgen()
 
-    with _quiet_fd1(True):
+    with _quiet_fd1(True), _no_litter():
         try:
             tetgen.TetGen(V, F.astype(np.int32)).tetrahedralize(switches="dQ")
         except RuntimeError as e:  # "The input surface mesh contain self-intersections."
@@ -213,9 +230,10 @@ def _tetwild(V, F, S, verbose: bool, **options):
     oriented (fTetWild's own order is the opposite one)."""
     import pytetwild  # ImportError when missing (also raised when its pyvista dependency is)
 
-    VV, TT = pytetwild.tetrahedralize(
-        np.asarray(V, float), np.asarray(F, np.int32), quiet=not verbose, **options
-    )
+    with _no_litter():
+        VV, TT = pytetwild.tetrahedralize(
+            np.asarray(V, float), np.asarray(F, np.int32), quiet=not verbose, **options
+        )
     VV, TT = np.array(VV, dtype=np.float64), np.array(TT, dtype=np.int64)
     flip = _tet_volumes(VV, TT) < 0
     TT[flip] = TT[flip][:, [0, 1, 3, 2]]
