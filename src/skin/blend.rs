@@ -280,9 +280,11 @@ pub(crate) mod avx {
     /// Why `B G <= 9`: AVX2 has 16 `ymm` registers. The accumulators (`B G`), the handle's rows
     /// (`G`) and the broadcast weights (`B`) must all fit, or LLVM spills accumulators to the
     /// stack and the loop becomes a chain of store-to-load forwards (the 4-vertex version of this
-    /// kernel, 12 + 3 + 4 = 19 registers, did exactly that and ran at about 40 % of the FMA
-    /// rate). `B = 3, G = 3` uses 9 + 3 + 3 = 15 registers, and its 9 independent accumulator
-    /// chains cover the FMA latency (4 cycles x 2 FMA pipes = 8 chains needed).
+    /// kernel, 12 + 3 + 4 = 19 registers, did exactly that: one accumulator went through the
+    /// stack every handle and ~20 register moves shuffled the rest; it took 3x the CPU time of
+    /// this one for n = 1M, m = 16). `B = 3, G = 3` uses 9 + 3 + 3 = 15 registers (2D: `B = 4`,
+    /// 8 + 2 + 4 = 14), and the 8 or 9 independent accumulator chains cover the FMA latency
+    /// (4 cycles x 2 FMA pipes = 8 chains needed).
     #[target_feature(enable = "avx2,fma")]
     #[inline]
     pub(crate) unsafe fn lbs_dense_block<const G: usize, const B: usize>(
