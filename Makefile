@@ -13,7 +13,7 @@ $(VENV)/.deps: pyproject.toml Makefile
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q "maturin>=1.5,<2" numpy scipy matplotlib tqdm pytest libigl gpytoolbox \
-	    clarabel osqp triangle tetgen nbmake ipykernel ruff meshio trimesh
+	    clarabel osqp triangle tetgen pytetwild pyvista nbmake ipykernel ruff meshio trimesh
 	touch $@
 
 venv: $(VENV)/.deps

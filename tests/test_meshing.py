@@ -196,28 +196,6 @@ def test_tetgen_failure_without_fallback_is_a_clear_error(tube, monkeypatch):
         skinrs.mesh_with_skeleton(V, F, C, BE)
 
 
-def test_fallback_mesher_snaps_vertices_onto_samples(tube, monkeypatch):
-    """When TetGen fails, a fallback mesh without the samples gets its nearest vertices moved
-    onto them, with a warning giving the distance."""
-    V, F, C, BE = tube
-    real = meshing._tetgen
-
-    def broken(*args, **kw):
-        raise RuntimeError("Failed to tetrahedralize")
-
-    def fallback(V, F, S, verbose):  # stands in for fTetWild: a quality mesh of the surface only
-        return real(V, F, np.zeros((0, 3)), "pq1.2Y", verbose)
-
-    monkeypatch.setattr(meshing, "_tetgen", broken)
-    monkeypatch.setattr(meshing, "_tetwild", fallback)
-    with pytest.warns(meshing.MeshingWarning, match=r"fTetWild.*largest move"):
-        Vv, _T, b, bc = skinrs.mesh_with_skeleton(V, F, C, BE)
-    S = expected_samples(C, BE, mean_edge_length(V, F))
-    assert cKDTree(Vv[b]).query(S)[0].max() == 0.0
-    assert len(b) == len(np.unique(b)) == len(S) - 1  # the shared joint once
-    check_bc(Vv, b, bc, C, BE)
-
-
 def test_bad_arguments(tube):
     V, F, C, BE = tube
     with pytest.raises(ValueError, match="no handles"):
@@ -244,7 +222,7 @@ def test_fallback_remeshes_the_repaired_surface_and_interpolates_weights(tube, m
             raise RuntimeError("Failed to tetrahedralize")
         return real(*args, **kw)
 
-    def fallback(V, F, S, verbose):  # stands in for fTetWild (its own surface, no samples)
+    def fallback(V, F, S, verbose, **options):  # stands in for fTetWild (no samples)
         return real(V, F, np.zeros((0, 3)), "pq1.5YQ", verbose)
 
     monkeypatch.setattr(meshing, "_tetgen", first_fails)
@@ -271,3 +249,106 @@ def test_point_handles_come_first(tube):
     assert np.all(bc[bc[:, 0] > 0, 1:] == 0)
     check_bc(Vv, b[bc[:, 0] == 0], bc[bc[:, 0] == 0][:, 1:], C, BE)
     check_weights(W, vol["W"], b, bc)
+
+
+# --- the real fallback: pytetwild (fTetWild) on a surface TetGen rejects ----------------------
+
+
+@pytest.fixture(scope="module")
+def crossing_tubes():
+    """Two overlapping closed tubes, the second bent by 50 degrees (an elbow modelled as two
+    intersecting parts, as artists do): a self-intersecting surface that TetGen rejects. One bone
+    runs along each tube."""
+    c, s = np.cos(np.radians(50)), np.sin(np.radians(50))
+    R = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+    V1, F1 = cylinder(12, 10, length=2.5, radius=0.5)
+    V2, F2 = cylinder(12, 10, length=2.5, radius=0.5)
+    V2 = (V2 - [0.4, 0, 0]) @ R.T + [2.1, 0, 0]
+    V, F = np.vstack([V1, V2]), np.vstack([F1, F2 + len(V1)])
+    C = np.array([[0.2, 0, 0], [2.1, 0, 0], [2.1, 0, 0] + R @ [1.9, 0, 0]])
+    return V, F, C, np.array([[0, 1], [1, 2]])
+
+
+def _tubes_checks(V, F, C, BE, W, vol):
+    Vv, T, b, bc = vol["V"], vol["T"], vol["b"], vol["bc"]
+    S = expected_samples(C, BE, mean_edge_length(V, F))
+    assert cKDTree(Vv[b]).query(S)[0].max() == 0.0  # every bone sample is a vertex, exactly
+    assert len(b) == len(np.unique(b)) == len(S) - 1  # the shared joint once
+    check_bc(Vv, b, bc, C, BE)
+    assert meshing._tet_volumes(Vv, T).min() > 0  # no inverted or flat tet
+    check_weights(vol["W"], vol["W"], b, bc)  # volume weights: >= 0, rows sum to 1, bc exact
+    assert W.shape == (len(V), 2) and W.min() >= 0.0
+    assert np.abs(W.sum(axis=1) - 1).max() < 1e-12
+    # far ends of the tubes follow their own bone
+    far0 = np.linalg.norm(V - C[0], axis=1) < 0.6
+    far1 = np.linalg.norm(V - C[2], axis=1) < 0.6
+    assert np.all(W[far0].argmax(axis=1) == 0) and np.all(W[far1].argmax(axis=1) == 1)
+
+
+def test_tetgen_rejects_crossing_tubes_and_pytetwild_meshes_them(
+    crossing_tubes, tmp_path, monkeypatch
+):
+    """Real fallback: TetGen refuses the self-intersecting surface, fTetWild repairs it, and
+    TetGen meshes the repaired boundary with every bone sample inserted exactly."""
+    import pytetwild  # noqa: F401 - installed by `make venv`; a missing package is a failure
+
+    monkeypatch.chdir(tmp_path)  # TetGen and fTetWild write scratch files here; none may stay
+    V, F, C, BE = crossing_tubes
+    assert meshing._self_intersects(V, F)
+    with pytest.raises(RuntimeError, match="self-intersections"):
+        meshing._tetgen(V, F, np.zeros((0, 3)), "pq2YQ", False)  # (no samples: TetGen is sane)
+    with pytest.warns(meshing.MeshingWarning, match="fTetWild's repaired surface"):
+        W, vol = skinrs.skin_weights(V, F, C, BE, tol=1e-3, return_mesh=True)
+    _tubes_checks(V, F, C, BE, W, vol)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_pytetwild_fallback_snaps_nearest_vertices_onto_bone_samples(
+    crossing_tubes, tmp_path, monkeypatch
+):
+    """Last resort, with the real fTetWild: when TetGen fails on the repaired boundary too, the
+    nearest interior fTetWild vertices are moved onto the samples (no tet inverted), and the
+    warning reports the snapping distance."""
+    import pytetwild  # noqa: F401
+
+    monkeypatch.chdir(tmp_path)
+    V, F, C, BE = crossing_tubes
+
+    def refuses(*args, **kw):  # TetGen also refuses fTetWild's boundary
+        raise RuntimeError("Failed to tetrahedralize")
+
+    seen = {}
+    real_snap = meshing._snap
+
+    def spy(Vw, Tw, S, **kw):  # records the real snapping (inputs and answer), changes nothing
+        out = real_snap(Vw, Tw, S, **kw)
+        seen.update(Vw=Vw.copy(), S=S, idx=out[1], dist=out[2])
+        return out
+
+    monkeypatch.setattr(meshing, "_tetgen", refuses)
+    monkeypatch.setattr(meshing, "_snap", spy)
+    with pytest.warns(meshing.MeshingWarning, match=r"moved \d+ volume vertices") as rec:
+        W, vol = skinrs.skin_weights(V, F, C, BE, tol=1e-3, return_mesh=True)
+    _tubes_checks(V, F, C, BE, W, vol)
+    Vw, S, idx, dist = seen["Vw"], seen["S"], seen["idx"], seen["dist"]
+    np.testing.assert_allclose(dist, np.linalg.norm(Vw[idx] - S, axis=1), rtol=0, atol=1e-15)
+    msg = next(str(w.message) for w in rec if "snapping distance" in str(w.message))
+    largest = float(msg.split("largest ")[1].split(",")[0])
+    assert largest == pytest.approx(dist.max(), rel=1e-2)
+    # each sample took a vertex near it: within one target edge length of fTetWild's mesh
+    rho = mean_edge_length(V, F)
+    assert dist.max() <= rho
+    # the moved vertices are the only ones that changed, and they sit exactly on the samples
+    moved = np.flatnonzero(np.any(vol["V"] != Vw, axis=1))
+    assert set(moved) <= set(idx.tolist())
+    assert np.array_equal(vol["V"][idx], S)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_self_intersecting_surface_without_pytetwild_says_what_to_do(crossing_tubes, monkeypatch):
+    V, F, C, BE = crossing_tubes
+    monkeypatch.setitem(sys.modules, "pytetwild", None)
+    with pytest.raises(
+        ImportError, match=r"self-intersections.*pytetwild.*pip install skinrs\[mesh\].*repair"
+    ):
+        skinrs.mesh_with_skeleton(V, F, C, BE)

@@ -170,30 +170,80 @@ def _quiet_fd1(quiet: bool):
         os.close(saved)
 
 
-def _tetgen(V, F, S, flags: str, verbose: bool):
+# Files TetGen (on a self-intersecting surface) and fTetWild write into the working directory.
+_LITTER = ("tetgen-tmpfile_skipped.face", "tetgen-tmpfile_skipped.node", "__tracked_surface.stl")
+
+
+@contextlib.contextmanager
+def _no_litter():
+    """Removes the scratch files the meshers leave in the working directory (only those the
+    call created: a file of that name that was there before is left alone)."""
+    before = {f for f in _LITTER if os.path.exists(f)}
+    try:
+        yield
+    finally:
+        for f in set(_LITTER) - before:
+            with contextlib.suppress(OSError):
+                os.remove(f)
+
+
+def _import_tetgen():
     try:
         import tetgen
     except ImportError:
         raise ImportError(f"mesh_with_skeleton needs TetGen in 3D: {_INSTALL}") from None
+    return tetgen
+
+
+def _tetgen(V, F, S, flags: str, verbose: bool):
+    tetgen = _import_tetgen()
     if not verbose and "Q" not in flags:
         flags += "Q"
     pts = np.vstack([V, S])
-    with _quiet_fd1(not verbose):
+    with _quiet_fd1(not verbose), _no_litter():
         tg = tetgen.TetGen(pts, F.astype(np.int32))
         VV, TT = tg.tetrahedralize(switches=flags)[:2]
     # copies: the arrays may view memory owned by `tg`, freed when it goes away
     return np.array(VV, dtype=np.float64, copy=True), np.array(TT, dtype=np.int64, copy=True)
 
 
-def _tetwild(V, F, S, verbose: bool):
+def _self_intersects(V, F) -> bool:
+    """Whether TetGen finds intersecting faces in the surface alone (switch ``d``).
+
+    Checked before the real TetGen run because TetGen, given a self-intersecting surface *and*
+    extra points to insert, can corrupt its heap and abort the whole Python process (seen with
+    two overlapping tubes) instead of raising; on the bare surface the check raises cleanly."""
+    tetgen = _import_tetgen()
+
+    with _quiet_fd1(True), _no_litter():
+        try:
+            tetgen.TetGen(V, F.astype(np.int32)).tetrahedralize(switches="dQ")
+        except RuntimeError as e:  # "The input surface mesh contain self-intersections."
+            return "self-intersect" in str(e)
+    return False
+
+
+def _tetwild(V, F, S, verbose: bool, **options):
     """Fallback mesher: fTetWild (robust to self-intersections and holes). Does not keep the
-    input vertices or insert points, so the caller snaps vertices onto the samples."""
+    input vertices or insert points, so the caller meshes its boundary again or snaps vertices
+    onto the samples. ``options`` go to ``pytetwild.tetrahedralize``. Tets come back positively
+    oriented (fTetWild's own order is the opposite one)."""
     import pytetwild  # ImportError when missing (also raised when its pyvista dependency is)
 
-    VV, TT = pytetwild.tetrahedralize(
-        np.asarray(V, float), np.asarray(F, np.int32), quiet=not verbose
-    )
-    return np.asarray(VV, float), np.asarray(TT, np.int64)
+    with _no_litter():
+        VV, TT = pytetwild.tetrahedralize(
+            np.asarray(V, float), np.asarray(F, np.int32), quiet=not verbose, **options
+        )
+    VV, TT = np.array(VV, dtype=np.float64), np.array(TT, dtype=np.int64)
+    flip = _tet_volumes(VV, TT) < 0
+    TT[flip] = TT[flip][:, [0, 1, 3, 2]]
+    return VV, TT
+
+
+def _tet_volumes(V, T):
+    X = V[T]
+    a, b, c = X[:, 1] - X[:, 0], X[:, 2] - X[:, 0], X[:, 3] - X[:, 0]
+    return np.einsum("ij,ij->i", a, np.cross(b, c)) / 6.0
 
 
 def _triangle(V, E, S, seg_S, flags: str, verbose: bool):
@@ -234,6 +284,7 @@ def mesh_with_skeleton(
     samples_per_edge: float = 2.0,
     min_samples: int = 2,
     flags: str | None = None,
+    tetwild_options: dict | None = None,
     verbose: bool = False,
 ):
     """Volume mesh of a closed surface (3D) or a 2D domain whose vertices include the handles.
@@ -244,9 +295,12 @@ def mesh_with_skeleton(
     kept), Triangle in 2D (bones as segments; flags ``"pq30Y"`` for an outline, ``"pY"`` for a
     given triangle mesh, whose vertices are all kept and which is not refined). The input vertices keep their
     indices: ``V_vol[:len(V)] == V``. If TetGen rejects the surface (self-intersections,
-    holes) and ``pytetwild`` is installed, fTetWild meshes it instead, the nearest volume vertices
-    are moved onto the samples (with a warning reporting the largest move) and the surface rows
-    no longer match ``V`` (:func:`skin_weights` then interpolates).
+    holes) and ``pytetwild`` is installed, fTetWild meshes it instead (target edge length: the
+    input's mean edge length), then TetGen meshes fTetWild's repaired boundary with the samples
+    inserted exactly; if that fails too, the nearest interior fTetWild vertices are moved onto
+    the samples (a move that would invert a tet is not made; the next nearest vertex is tried).
+    Either way a :class:`MeshingWarning` says so (the snapping one reports the largest move),
+    and the surface rows no longer match ``V`` (:func:`skin_weights` then interpolates).
 
     Parameters
     ----------
@@ -264,6 +318,9 @@ def mesh_with_skeleton(
     samples_per_edge, min_samples : bone sampling density, see above.
     flags : str, optional
         TetGen / Triangle switches (``Q``, quiet, is added unless ``verbose``).
+    tetwild_options : dict, optional
+        Keyword arguments of ``pytetwild.tetrahedralize`` for the fallback (e.g.
+        ``edge_length_abs``, ``stop_energy``; larger ``stop_energy`` is faster, lower quality).
 
     Returns
     -------
@@ -362,6 +419,8 @@ def mesh_with_skeleton(
         Vv = T = None
         err = None
         try:
+            if _self_intersects(V, F):
+                raise RuntimeError("the input surface has self-intersections")
             Vv, T = _tetgen(V, F, Si, flags or "pq2Y", verbose)
             exact = _rows_match(Vv, V, Si)
         except ImportError:
@@ -369,15 +428,23 @@ def mesh_with_skeleton(
         except Exception as e:  # noqa: BLE001 - TetGen raises RuntimeError and others
             err, exact = e, False
         if not exact:
+            user = dict(tetwild_options or {})
+            opts = {"edge_length_abs": rho, **user}
+            # for snapping, vertices must be at least as dense as the samples
+            fine = {**opts, "edge_length_abs": user.get("edge_length_abs", rho / samples_per_edge)}
+
+            def finer():
+                return _tetwild(V, F, Si, verbose, **fine)
+
             try:
-                Vw, Tw = _tetwild(V, F, Si, verbose)
+                Vw, Tw = _tetwild(V, F, Si, verbose, **opts)
             except ImportError as e:
                 why = f"TetGen failed ({err})" if err else "TetGen did not keep the input vertices"
                 raise ImportError(
                     f"{why}; the fallback mesher pytetwild is not available ({e}): "
                     f"{_INSTALL} (or repair the surface)"
                 ) from None
-            return _fallback(Vw, Tw, S, handles, nP + nB, scale, flags or "pq2Y", verbose)
+            return _fallback(Vw, Tw, S, handles, nP + nB, scale, flags or "pq2Y", verbose, finer)
 
     b = np.where(on_vertex, nearest, 0)
     b[insert] = n + np.arange(len(insert))
@@ -416,9 +483,10 @@ def _boundary_faces(T):
     return faces[cnt[inv.reshape(-1)] == 1]
 
 
-def _fallback(Vw, Tw, S, handles, m, scale, flags, verbose):
+def _fallback(Vw, Tw, S, handles, m, scale, flags, verbose, finer):
     """After fTetWild: mesh its clean boundary again with TetGen and the samples inserted; if
-    that fails too, move the nearest fTetWild vertices onto the samples."""
+    that fails too, mesh again with fTetWild at the sample spacing (``finer()``) and move the
+    nearest interior vertices onto the samples."""
     Fb = _boundary_faces(Tw)
     used, Fs = np.unique(Fb, return_inverse=True)
     Vs, Fs = Vw[used], Fs.reshape(-1, 3)
@@ -437,14 +505,13 @@ def _fallback(Vw, Tw, S, handles, m, scale, flags, verbose):
             stacklevel=3,
         )
         return Vv, T, len(Vs) + np.arange(len(S), dtype=np.int64), bc
-    idx, d = _assign_nearest(Vw, S)
-    Vv = Vw.copy()
-    Vv[idx] = S
+    Vw, Tw = finer()
+    Vv, idx, d = _snap(Vw, Tw, S)
     warnings.warn(
         f"TetGen could not mesh the surface; used fTetWild and moved {len(idx)} volume "
-        f"vertices onto the handle samples (largest move {d.max():.3g}, "
-        f"{d.max() / scale:.2%} of the bounding-box diagonal). The input surface "
-        f"vertices are not rows of V_vol.",
+        f"vertices onto the handle samples (snapping distance: largest {d.max():.3g}, mean "
+        f"{d.mean():.3g}; largest = {d.max() / scale:.2%} of the bounding-box diagonal). The "
+        f"input surface vertices are not rows of V_vol.",
         MeshingWarning,
         stacklevel=3,
     )
@@ -452,24 +519,51 @@ def _fallback(Vw, Tw, S, handles, m, scale, flags, verbose):
     return Vv, Tw, idx[order].astype(np.int64), bc[order]
 
 
-def _assign_nearest(Vv, S, k: int = 16):
-    """A distinct volume vertex for each sample, nearest first (greedy by distance)."""
+def _snap(Vw, Tw, S, k: int = 32):
+    """Moves a distinct interior vertex of ``(Vw, Tw)`` onto each sample, nearest first
+    (greedy by distance). A move that would leave an incident tet inverted or nearly flat
+    (volume below 1e-3 of the mean) is not made; the next nearest free vertex is tried.
+    Boundary vertices stay put, so the surface does not change.
+
+    Returns the moved vertices, the vertex chosen for each sample and the distance moved."""
     from scipy.spatial import cKDTree
 
-    k = min(k, len(Vv))
+    Vv = np.array(Vw, dtype=np.float64, copy=True)
+    nv = len(Vv)
+    boundary = np.zeros(nv, bool)
+    boundary[_boundary_faces(Tw).ravel()] = True
+    # tets around each vertex (CSR)
+    flat = Tw.ravel()
+    order = np.argsort(flat, kind="stable")
+    start = np.searchsorted(flat[order], np.arange(nv + 1))
+    tets_of = order // 4
+    vmin = 1e-3 * np.abs(_tet_volumes(Vv, Tw)).mean()
+    k = min(k, nv)
     d, nn = cKDTree(Vv).query(S, k=k)
     d, nn = d.reshape(len(S), k), nn.reshape(len(S), k)
-    taken, idx, dist = set(), np.empty(len(S), np.int64), np.empty(len(S))
+    taken = boundary.copy()
+    idx, dist = np.empty(len(S), np.int64), np.empty(len(S))
     for s in np.argsort(d[:, 0]):
-        free = [c for c in range(k) if nn[s, c] not in taken]
-        if not free:
+        for c in range(k):
+            v = nn[s, c]
+            if taken[v]:
+                continue
+            inc = tets_of[start[v] : start[v + 1]]
+            old = Vv[v].copy()
+            Vv[v] = S[s]
+            if _tet_volumes(Vv, Tw[inc]).min() > vmin:
+                idx[s], dist[s] = v, np.linalg.norm(S[s] - old)
+                taken[v] = True
+                break
+            Vv[v] = old
+        else:
             raise ValueError(
-                "the fallback mesh is too coarse for the skeleton: samples crowd "
-                "onto the same vertices; lower samples_per_edge or refine"
+                f"the fallback mesh is too coarse for the skeleton: no free interior vertex "
+                f"among the {k} nearest to sample {S[s].tolist()} can be moved onto it without "
+                "inverting a tet; pass a smaller tetwild_options['edge_length_abs'], lower "
+                "samples_per_edge, or repair the surface so that TetGen can mesh it"
             )
-        idx[s], dist[s] = nn[s, free[0]], d[s, free[0]]
-        taken.add(int(idx[s]))
-    return idx, dist
+    return Vv, idx, dist
 
 
 # ---------------------------------------------------------------------------------------------

@@ -85,11 +85,11 @@ impl Influences<'_> {
         }
     }
 
-    /// Asks the CPU to start loading the weights of vertex `i` (a few vertices ahead of the
-    /// one being blended): the hardware prefetcher alone left the dense kernel waiting on
-    /// memory about half of the time.
+    /// Asks the CPU to start loading the weights of vertices `i..i + rows` (a few vertices
+    /// ahead of the ones being blended): the hardware prefetcher alone left the dense kernel
+    /// waiting on memory about half of the time.
     #[inline(always)]
-    pub(crate) fn prefetch(&self, i: usize) {
+    pub(crate) fn prefetch(&self, i: usize, rows: usize) {
         #[cfg(target_arch = "x86_64")]
         {
             use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
@@ -104,11 +104,11 @@ impl Influences<'_> {
             };
             // Packed rows are short and read in step with V and U: the hardware handles them.
             if let Influences::Dense { w, m } = *self {
-                lines(w, i * m, m);
+                lines(w, i * m, rows * m);
             }
         }
         #[cfg(not(target_arch = "x86_64"))]
-        let _ = i;
+        let _ = (i, rows);
     }
 
     /// The weights of vertex `i` and, when packed, their handle indices (checked against
@@ -272,45 +272,118 @@ pub(crate) mod avx {
         unsafe { apply(&a, x, o) };
     }
 
-    /// Four consecutive vertices with dense weights `w (4, m)`: each handle's rows are loaded
-    /// once for the four (one accumulator chain per vertex and row: 4 G independent chains),
-    /// which roughly halves the loads per multiply-add of [`lbs_point`].
+    /// `B` consecutive vertices with dense weights `w (B, m)`, blended like a small GEMM
+    /// micro-kernel: each handle's `G` rows are loaded once into registers and shared by the `B`
+    /// vertices, and each vertex's weight is broadcast once and shared by its `G` rows, so one
+    /// handle costs `G` loads + `B` broadcasts for `B G` fused multiply-adds.
+    ///
+    /// Why `B G <= 9`: AVX2 has 16 `ymm` registers. The accumulators (`B G`), the handle's rows
+    /// (`G`) and the broadcast weights (`B`) must all fit, or LLVM spills accumulators to the
+    /// stack and the loop becomes a chain of store-to-load forwards (the 4-vertex version of this
+    /// kernel, 12 + 3 + 4 = 19 registers, did exactly that: one accumulator went through the
+    /// stack every handle and ~20 register moves shuffled the rest; it took 3x the CPU time of
+    /// this one for n = 1M, m = 16). `B = 3, G = 3` uses 9 + 3 + 3 = 15 registers (2D: `B = 4`,
+    /// 8 + 2 + 4 = 14), and the 8 or 9 independent accumulator chains cover the FMA latency
+    /// (4 cycles x 2 FMA pipes = 8 chains needed).
     #[target_feature(enable = "avx2,fma")]
     #[inline]
-    pub(crate) unsafe fn lbs_dense4<const G: usize>(
+    pub(crate) unsafe fn lbs_dense_block<const G: usize, const B: usize>(
         w: &[f64],
         table: &[Lanes<G>],
         x: &[f64],
         o: &mut [f64],
     ) {
         let m = table.len();
-        let (w0, w1, w2, w3) = (&w[..m], &w[m..2 * m], &w[2 * m..3 * m], &w[3 * m..4 * m]);
-        let zero = [_mm256_setzero_pd(); G];
-        let (mut a0, mut a1, mut a2, mut a3) = (zero, zero, zero, zero);
+        // `[..m]` tells LLVM every row has exactly `m` entries: no bounds check in the loop
+        // (a loop, not `array::from_fn`, which LLVM left as an out-of-line call per block)
+        let mut rows: [&[f64]; B] = [&[]; B];
+        for (b, row) in rows.iter_mut().enumerate() {
+            *row = &w[b * m..][..m];
+        }
+        let mut acc = [[_mm256_setzero_pd(); G]; B];
         for (j, t) in table.iter().enumerate() {
-            let (b0, b1, b2, b3) = (
-                _mm256_set1_pd(w0[j]),
-                _mm256_set1_pd(w1[j]),
-                _mm256_set1_pd(w2[j]),
-                _mm256_set1_pd(w3[j]),
-            );
+            let mut tv = [_mm256_setzero_pd(); G];
             for g in 0..G {
                 // SAFETY: `t[g]` is 4 contiguous f64.
-                let tv = unsafe { _mm256_loadu_pd(t[g].as_ptr()) };
-                a0[g] = _mm256_fmadd_pd(b0, tv, a0[g]);
-                a1[g] = _mm256_fmadd_pd(b1, tv, a1[g]);
-                a2[g] = _mm256_fmadd_pd(b2, tv, a2[g]);
-                a3[g] = _mm256_fmadd_pd(b3, tv, a3[g]);
+                tv[g] = unsafe { _mm256_loadu_pd(t[g].as_ptr()) };
+            }
+            for b in 0..B {
+                let wb = _mm256_set1_pd(rows[b][j]);
+                for g in 0..G {
+                    acc[b][g] = _mm256_fmadd_pd(wb, tv[g], acc[b][g]);
+                }
             }
         }
-        let d = G;
-        // SAFETY (all four): same target features as the caller's.
-        unsafe {
-            apply(&a0, &x[..d], &mut o[..d]);
-            apply(&a1, &x[d..2 * d], &mut o[d..2 * d]);
-            apply(&a2, &x[2 * d..3 * d], &mut o[2 * d..3 * d]);
-            apply(&a3, &x[3 * d..4 * d], &mut o[3 * d..4 * d]);
+        for b in 0..B {
+            // SAFETY: same target features as the caller's.
+            unsafe { apply(&acc[b], &x[b * G..(b + 1) * G], &mut o[b * G..(b + 1) * G]) };
         }
+    }
+
+    /// All rows of a chunk with packed weights (`k` influences per vertex), in one function so
+    /// that nothing in the loop is a call: before, the per-vertex blend (`accumulate`) was not
+    /// inlined, and each vertex paid a call plus a return of its `G` registers through the
+    /// stack. Each handle index is checked once (`table.get`, no separate validation pass);
+    /// returns the first `(row, slot)` holding an index outside `0..m`, having written the rows
+    /// before it.
+    #[target_feature(enable = "avx2,fma")]
+    pub(crate) unsafe fn lbs_packed_rows<const G: usize, const K: usize>(
+        idx: &[i64],
+        w: &[f64],
+        k: usize,
+        table: &[Lanes<G>],
+        x: &[f64],
+        o: &mut [f64],
+    ) -> Option<(usize, usize)> {
+        // `K > 0` fixes `k` at compile time (the common widths are instantiated by the caller):
+        // the slot loop is then unrolled and the row slices need no bounds checks.
+        let k = if K > 0 { K } else { k };
+        let load = |t: &Lanes<G>, g: usize| {
+            // SAFETY: `t[g]` is 4 contiguous f64.
+            unsafe { _mm256_loadu_pd(t[g].as_ptr()) }
+        };
+        let rows = idx
+            .chunks_exact(k)
+            .zip(w.chunks_exact(k))
+            .zip(x.chunks_exact(G))
+            .zip(o.chunks_exact_mut(G));
+        for (r, (((ir, wr), xr), or)) in rows.enumerate() {
+            // Two accumulators (even and odd slots), as in `scalar_blend`: two independent
+            // chains of multiply-adds per row.
+            let mut a0 = [_mm256_setzero_pd(); G];
+            let mut a1 = [_mm256_setzero_pd(); G];
+            let mut l = 0;
+            while l + 2 <= k {
+                // `as usize` maps negative indices far out of range: `get` catches both.
+                let Some(t0) = table.get(ir[l] as usize) else {
+                    return Some((r, l));
+                };
+                let Some(t1) = table.get(ir[l + 1] as usize) else {
+                    return Some((r, l + 1));
+                };
+                let (b0, b1) = (_mm256_set1_pd(wr[l]), _mm256_set1_pd(wr[l + 1]));
+                for g in 0..G {
+                    a0[g] = _mm256_fmadd_pd(b0, load(t0, g), a0[g]);
+                    a1[g] = _mm256_fmadd_pd(b1, load(t1, g), a1[g]);
+                }
+                l += 2;
+            }
+            if l < k {
+                let Some(t0) = table.get(ir[l] as usize) else {
+                    return Some((r, l));
+                };
+                let b0 = _mm256_set1_pd(wr[l]);
+                for (g, a) in a0.iter_mut().enumerate() {
+                    *a = _mm256_fmadd_pd(b0, load(t0, g), *a);
+                }
+            }
+            for g in 0..G {
+                a0[g] = _mm256_add_pd(a0[g], a1[g]);
+            }
+            // SAFETY: same target features as this function's.
+            unsafe { apply(&a0, xr, or) };
+        }
+        None
     }
 
     /// `u_p = row_p . [x; 1]` for the blended rows in registers; writes `o[..G]`.
@@ -385,9 +458,16 @@ pub(crate) fn has_avx2() -> bool {
 /// Error for the first vertex of a chunk holding a non-finite number, if any.
 #[inline(always)]
 pub(crate) fn first_nonfinite(first: usize, d: usize, chunk: &[f64]) -> Result<(), ChunkError> {
-    // `x * 0` is 0 for finite x and NaN otherwise: one vectorisable pass, then locate.
-    let s: f64 = chunk.iter().map(|x| x * 0.0).sum();
-    if s == 0.0 {
+    // A float is NaN or infinite exactly when its 11 exponent bits are all ones. Testing the bits
+    // and OR-ing the answers is an integer reduction, which LLVM vectorises (compare + or on
+    // 4 lanes per instruction). The previous `sum of x * 0` was a single chain of dependent f64
+    // additions (3-4 cycles each, float addition is not reassociated), about 10 cycles per
+    // vertex: as much time as the whole packed blend.
+    const EXP: u64 = 0x7ff0_0000_0000_0000;
+    let bad = chunk
+        .iter()
+        .fold(0u64, |acc, x| acc | u64::from(x.to_bits() & EXP == EXP));
+    if bad == 0 {
         return Ok(());
     }
     let p = chunk.iter().position(|x| !x.is_finite()).unwrap_or(0);

@@ -141,6 +141,94 @@ fn chunk_avx2<const D: usize>(
     kernel::<D, true>(inf, table, first, v, out, normals)
 }
 
+/// Rows `first..first + out.len() / D` on the AVX2/FMA path (no normals), into `out`; the
+/// caller checks finiteness.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn avx_rows<const D: usize>(
+    inf: &Influences<'_>,
+    table: &[Lanes<D>],
+    first: usize,
+    v: &[f64],
+    out: &mut [f64],
+) -> Result<(), ChunkError> {
+    let m = table.len();
+    let done = match *inf {
+        Influences::Dense { w, m } => {
+            // blocks of B vertices share the loads of each handle's rows (see
+            // `lbs_dense_block` for why B = 3 in 3D, 4 in 2D)
+            dense_blocks::<D>(w, m, inf, table, first, v, out)
+        }
+        Influences::Packed { idx, w, k } => {
+            let rows = out.len() / D;
+            let (ic, wc) = (&idx[first * k..(first + rows) * k], &w[first * k..]);
+            use super::blend::avx::lbs_packed_rows as rows_k;
+            // SAFETY: only called on the AVX2/FMA path, after runtime detection.
+            let bad = unsafe {
+                match k {
+                    1 => rows_k::<D, 1>(ic, wc, k, table, v, out),
+                    2 => rows_k::<D, 2>(ic, wc, k, table, v, out),
+                    3 => rows_k::<D, 3>(ic, wc, k, table, v, out),
+                    4 => rows_k::<D, 4>(ic, wc, k, table, v, out),
+                    6 => rows_k::<D, 6>(ic, wc, k, table, v, out),
+                    8 => rows_k::<D, 8>(ic, wc, k, table, v, out),
+                    _ => rows_k::<D, 0>(ic, wc, k, table, v, out),
+                }
+            };
+            if let Some((r, s)) = bad {
+                return Err(ChunkError::BadIndex(first + r, s, ic[r * k + s]));
+            }
+            rows
+        }
+    };
+    // the rows the dense blocks left (fewer than one block)
+    for ((r, x), o) in v
+        .chunks_exact(D)
+        .enumerate()
+        .zip(out.chunks_exact_mut(D))
+        .skip(done)
+    {
+        let (w, index) = inf.row(first + r, m)?;
+        // SAFETY: only called on the AVX2/FMA path, after runtime detection.
+        unsafe { super::blend::avx::lbs_point::<D>(w, index, table, x, o) };
+    }
+    Ok(())
+}
+
+/// The dense AVX2 blocks of a chunk; returns how many rows it did (the rest go one by one).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn dense_blocks<const D: usize>(
+    w: &[f64],
+    m: usize,
+    inf: &Influences<'_>,
+    table: &[Lanes<D>],
+    first: usize,
+    v: &[f64],
+    out: &mut [f64],
+) -> usize {
+    // B * D accumulators + D handle rows + B broadcasts must fit in 16 registers
+    let b = if D == 3 { 3 } else { 4 };
+    let rows = out.len() / D;
+    let mut r = 0;
+    while r + b <= rows {
+        inf.prefetch(first + r + PREFETCH_AHEAD, b);
+        let i = first + r;
+        let (x, o) = (&v[r * D..(r + b) * D], &mut out[r * D..(r + b) * D]);
+        let wb = &w[i * m..(i + b) * m];
+        // SAFETY: only called on the AVX2/FMA path, after runtime detection.
+        unsafe {
+            if D == 3 {
+                super::blend::avx::lbs_dense_block::<D, 3>(wb, table, x, o)
+            } else {
+                super::blend::avx::lbs_dense_block::<D, 4>(wb, table, x, o)
+            }
+        };
+        r += b;
+    }
+    r
+}
+
 #[inline(always)]
 fn kernel<const D: usize, const AVX: bool>(
     inf: &Influences<'_>,
@@ -154,33 +242,7 @@ fn kernel<const D: usize, const AVX: bool>(
     #[cfg(target_arch = "x86_64")]
     {
         if AVX && normals.is_none() {
-            let mut r = 0;
-            if let Influences::Dense { w, m } = *inf {
-                // blocks of four vertices share the loads of each handle's rows
-                let rows = out.len() / D;
-                while r + 4 <= rows {
-                    inf.prefetch(first + r + PREFETCH_AHEAD);
-                    inf.prefetch(first + r + PREFETCH_AHEAD + 2);
-                    let i = first + r;
-                    let (x, o) = (&v[r * D..(r + 4) * D], &mut out[r * D..(r + 4) * D]);
-                    // SAFETY: `AVX` is true only on the AVX2/FMA path, after runtime detection.
-                    unsafe {
-                        super::blend::avx::lbs_dense4::<D>(&w[i * m..(i + 4) * m], table, x, o)
-                    };
-                    r += 4;
-                }
-            }
-            for ((r, x), o) in v
-                .chunks_exact(D)
-                .enumerate()
-                .zip(out.chunks_exact_mut(D))
-                .skip(r)
-            {
-                inf.prefetch(first + r + PREFETCH_AHEAD);
-                let (w, index) = inf.row(first + r, m)?;
-                // SAFETY: `AVX` is true only on the AVX2/FMA path, after runtime detection.
-                unsafe { super::blend::avx::lbs_point::<D>(w, index, table, x, o) };
-            }
+            avx_rows::<D>(inf, table, first, v, out)?;
             return first_nonfinite(first, D, out);
         }
     }
