@@ -44,8 +44,11 @@ use crate::error::{SkinError, SkinResult};
 use crate::progress::{Event, Progress};
 use crate::sparse::{from_triplets, Csc};
 
-/// Relative duality gap of the L-BFGS warm start that guesses the first support.
-pub const WARM_GAP: f64 = 1e-3;
+/// Relative duality gap of the L-BFGS warm start that guesses the first support, and the
+/// weight below which its entries are left out of that support. Rounds / L-BFGS iterations on
+/// hand-403 at tol 1e-6: 1e-3 -> 15 / 90, 2e-3 -> 9 / 65, 3e-3 -> 9 / 50, 5e-3 -> 13 / 35,
+/// 1e-2 -> 16 / 20 (the small fixtures change by +-2 rounds).
+pub const WARM_GAP: f64 = 3e-3;
 /// Loosest partition-of-unity residual accepted from CG at the end, relative to `tol`. Rows are
 /// renormalised afterwards; on hand-403 1e-3 changed no support decision and cost an eighth more
 /// CG iterations.
@@ -187,8 +190,8 @@ fn pou_rounds(
     let (nf, m) = (prob.nf(), prob.m);
     // The warm start is only accurate to its gap: weights below WARM_GAP are mostly the
     // smooth tails of W(Y) (eq. 15) over regions that are zero at the optimum. Leaving them out
-    // took 15 instead of 18 rounds on hand-403 (6 vs 8 on woody, 8 vs 10 on disc-holes, 12 vs 11
-    // on knight).
+    // of the first support saves rounds (hand-403: 9 instead of 18; the 41k-vertex 2D case no
+    // longer stalls into the L-BFGS fallback).
     let mut support: Vec<bool> = w.iter().map(|&x| x > WARM_GAP).collect();
     for i in 0..nf {
         // Every row needs a support entry; its largest weight is the safest.
