@@ -1,0 +1,263 @@
+//! The point-based field and its visibility-aware kernel (Sec. 4.1-4.2, eqs. 2-4, 14).
+//!
+//! [`PointSet`] holds the field's points `x_i` (N of them) with
+//!   sigma  median distance to the 9th nearest neighbour (Sec. 6.1); kernel support `3 sigma`
+//!   dist   each point's distance to the boundary (infinite without a boundary)
+//!   grid   hash grid for radius queries
+//! The parameters `f` are a separate row-major N by K buffer (one row per point).
+//!
+//! Visibility (eq. 4) between an origin `o` and a point `x_i` needs a ray only when the two
+//! boundary-free balls `B(o, d_o)` and `B(x_i, d_i)` (`d` = distance to the boundary) do not
+//! cover the segment: if `|o - x_i| < d_o + d_i`, every point of the segment lies in one of the
+//! balls, so it cannot cross the boundary. This skips most interior pairs.
+//!
+//! Field value at `z` (eqs. 2, 14): `f(z) = sum_i k_i f_i / sum_i k_i`, `s = softplus(f(z))`,
+//! `alpha_hat = s / sum(s)`.
+
+use ndarray::ArrayView2;
+
+use super::sampling::{dist2, to_array, Domain};
+use super::{Boundary, BoundaryQueries, HashGrid};
+use crate::error::SkinResult;
+use crate::invalid;
+
+/// Counters of the visibility work (for the benchmark).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RayStats {
+    /// Candidate pairs within the kernel support.
+    pub pairs: u64,
+    /// Pairs that needed a ray (the two-ball test did not settle them).
+    pub rays: u64,
+    /// Seconds spent in neighbour search and visibility.
+    pub seconds: f64,
+}
+
+impl RayStats {
+    pub fn add(&mut self, o: &RayStats) {
+        self.pairs += o.pairs;
+        self.rays += o.rays;
+        self.seconds += o.seconds;
+    }
+}
+
+/// The field's points with their search structures.
+#[derive(Clone, Debug)]
+pub struct PointSet<const D: usize> {
+    pub x: Vec<[f64; D]>,
+    pub dist: Vec<f64>,
+    pub sigma: f64,
+    pub grid: HashGrid<D>,
+}
+
+/// Number of the neighbour whose median distance is `sigma` (Sec. 6.1).
+pub const SIGMA_KNN: usize = 9;
+
+/// Stable `log(1 + exp(t))` (eq. 14).
+#[inline]
+pub fn softplus(t: f64) -> f64 {
+    t.max(0.0) + (-t.abs()).exp().ln_1p()
+}
+
+/// Derivative of softplus: the logistic function.
+#[inline]
+pub fn sigmoid(t: f64) -> f64 {
+    if t >= 0.0 {
+        1.0 / (1.0 + (-t).exp())
+    } else {
+        let e = t.exp();
+        e / (1.0 + e)
+    }
+}
+
+impl<const D: usize> PointSet<D>
+where
+    Boundary<D>: BoundaryQueries<D>,
+{
+    /// Point set over `x` (N > SIGMA_KNN points) in `domain`: sigma, distances and grid.
+    pub fn new(x: Vec<[f64; D]>, domain: &Domain<D>) -> SkinResult<Self> {
+        if x.len() <= SIGMA_KNN {
+            return invalid!(
+                "the field needs more than {SIGMA_KNN} points, got {}",
+                x.len()
+            );
+        }
+        let a = to_array(&x);
+        let kd = super::knn_distance(a.view(), SIGMA_KNN)?;
+        let mut s = kd.clone();
+        s.sort_by(f64::total_cmp);
+        let sigma = s[s.len() / 2];
+        if !(sigma > 0.0) {
+            return invalid!("the field's points coincide (sigma = 0)");
+        }
+        let dist = point_distances(&x, domain);
+        // Cells of 2 sigma: a query of radius 3-4 sigma visits 3-5 cells per axis.
+        let grid = HashGrid::<D>::new(a.view(), 2.0 * sigma)?;
+        Ok(PointSet {
+            x,
+            dist,
+            sigma,
+            grid,
+        })
+    }
+
+    pub fn len(&self) -> usize {
+        self.x.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.x.is_empty()
+    }
+
+    /// Kernel support radius `3 sigma` (Sec. 4.1).
+    #[inline]
+    pub fn support(&self) -> f64 {
+        3.0 * self.sigma
+    }
+
+    /// Points within `r` of `o` that are visible from `o` (eq. 4), appended to `out`.
+    ///
+    /// Inputs: domain (its boundary blocks), o origin, d_o its distance to the boundary,
+    /// r radius, visibility (false: plain Gaussian kernel k_E, eq. 3).
+    pub fn visible_within(
+        &self,
+        domain: &Domain<D>,
+        o: &[f64; D],
+        d_o: f64,
+        r: f64,
+        visibility: bool,
+        out: &mut Vec<u32>,
+        stats: &mut RayStats,
+    ) {
+        let t = std::time::Instant::now();
+        let start = out.len();
+        let mut near = Vec::new();
+        self.grid.radius(o, r, &mut near);
+        stats.pairs += near.len() as u64;
+        match (&domain.boundary, visibility) {
+            (Some(b), true) => {
+                for i in near {
+                    let l = dist2(o, &self.x[i]).sqrt();
+                    if l < d_o + self.dist[i] {
+                        out.push(i as u32);
+                        continue;
+                    }
+                    stats.rays += 1;
+                    if !b.segment_hits(o, &self.x[i]) {
+                        out.push(i as u32);
+                    }
+                }
+            }
+            _ => out.extend(near.into_iter().map(|i| i as u32)),
+        }
+        // Sorted candidates: the gradient accumulation then walks memory in order.
+        out[start..].sort_unstable();
+        stats.seconds += t.elapsed().as_secs_f64();
+    }
+
+    /// Truncated Gaussian weights (eq. 3) at `z` of the candidates `cand`, into `k`
+    /// (zero outside `3 sigma`); returns their sum.
+    pub fn weights(&self, z: &[f64; D], cand: &[u32], k: &mut Vec<f64>) -> f64 {
+        let r2 = self.support() * self.support();
+        let c = -0.5 / (self.sigma * self.sigma);
+        k.clear();
+        let mut s = 0.0;
+        for &i in cand {
+            let d2 = dist2(z, &self.x[i as usize]);
+            let w = if d2 <= r2 { (c * d2).exp() } else { 0.0 };
+            k.push(w);
+            s += w;
+        }
+        s
+    }
+}
+
+/// Distance of each point to the boundary, in parallel (infinite without a boundary).
+fn point_distances<const D: usize>(x: &[[f64; D]], domain: &Domain<D>) -> Vec<f64>
+where
+    Boundary<D>: BoundaryQueries<D>,
+{
+    use rayon::prelude::*;
+    x.par_iter().map(|p| domain.dist(p)).collect()
+}
+
+/// The field at one point: interpolated parameters and normalised softplus (eqs. 2, 14).
+#[derive(Clone, Debug, Default)]
+pub struct FieldValue {
+    /// `f(z)`, K values.
+    pub f: Vec<f64>,
+    /// `alpha_hat(z) = softplus(f) / sum softplus(f)`, K values.
+    pub alpha: Vec<f64>,
+    /// `sum softplus(f(z))`.
+    pub sp_sum: f64,
+    /// Normalised kernel weights `k_i / sum k`, one per candidate.
+    pub k: Vec<f64>,
+}
+
+impl FieldValue {
+    /// Evaluates the field at `z` from candidates `cand` and parameters `f` (N by K,
+    /// row-major). Returns false (and leaves garbage) when no candidate has weight.
+    pub fn eval<const D: usize>(
+        &mut self,
+        ps: &PointSet<D>,
+        z: &[f64; D],
+        cand: &[u32],
+        f: &[f64],
+        nk: usize,
+    ) -> bool
+    where
+        Boundary<D>: BoundaryQueries<D>,
+    {
+        let s = ps.weights(z, cand, &mut self.k);
+        if !(s > 0.0) {
+            return false;
+        }
+        let inv = 1.0 / s;
+        self.f.clear();
+        self.f.resize(nk, 0.0);
+        for (j, &i) in cand.iter().enumerate() {
+            let w = self.k[j] * inv;
+            self.k[j] = w;
+            if w == 0.0 {
+                continue;
+            }
+            let row = &f[i as usize * nk..(i as usize + 1) * nk];
+            for (a, &b) in self.f.iter_mut().zip(row) {
+                *a += w * b;
+            }
+        }
+        self.alpha.clear();
+        self.alpha.extend(self.f.iter().map(|&t| softplus(t)));
+        self.sp_sum = self.alpha.iter().sum();
+        let inv = 1.0 / self.sp_sum;
+        for a in self.alpha.iter_mut() {
+            *a *= inv;
+        }
+        true
+    }
+
+    /// Back-propagates `g = dE / d alpha_hat(z)` (K values) into `grad` (N by K, row-major):
+    /// through the normalisation, the softplus and eq. 2.
+    pub fn backward(&self, cand: &[u32], g: &[f64], grad: &mut [f64], u: &mut Vec<f64>) {
+        let nk = g.len();
+        let ga: f64 = g.iter().zip(&self.alpha).map(|(a, b)| a * b).sum();
+        u.clear();
+        u.extend(
+            (0..nk).map(|m| (g[m] - ga) / self.sp_sum * sigmoid(self.f[m])),
+        );
+        for (j, &i) in cand.iter().enumerate() {
+            let w = self.k[j];
+            if w == 0.0 {
+                continue;
+            }
+            let row = &mut grad[i as usize * nk..(i as usize + 1) * nk];
+            for (a, &b) in row.iter_mut().zip(u.iter()) {
+                *a += w * b;
+            }
+        }
+    }
+}
+
+/// Rows of an N by K view as a row-major buffer.
+pub fn flat(f: ArrayView2<f64>) -> Vec<f64> {
+    f.iter().copied().collect()
+}
