@@ -210,7 +210,8 @@ FIELD_OPTIONS = {
 def _boundary_edges_2d(V, T):
     """Boundary segments of a 2D triangle mesh, oriented so the interior has winding number 1."""
     a, b, c = (V[T[:, i]] for i in range(3))
-    area = np.cross(b - a, c - a)
+    u, v = b - a, c - a
+    area = u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]
     T = np.where((area < 0)[:, None], T[:, [0, 2, 1]], T)
     E = np.concatenate([T[:, [0, 1]], T[:, [1, 2]], T[:, [2, 0]]])
     key = np.sort(E, axis=1)

@@ -49,6 +49,9 @@ pub struct PointSet<const D: usize> {
     pub grid: HashGrid<D>,
 }
 
+/// Deepest neighbours whose boundary-free balls are tried before tracing a ray.
+pub const ANCHORS: usize = 4;
+
 /// Number of the neighbour whose median distance is `sigma` (Sec. 6.1).
 pub const SIGMA_KNN: usize = 9;
 
@@ -135,9 +138,9 @@ where
         stats.pairs += near.len() as u64;
         match (&domain.boundary, visibility) {
             (Some(b), true) => {
+                let anchors = self.anchors(o, &near);
                 for i in near {
-                    let l = dist2(o, &self.x[i]).sqrt();
-                    if l < d_o + self.dist[i] {
+                    if self.covered(o, d_o, i, &anchors) {
                         out.push(i as u32);
                         continue;
                     }
@@ -152,6 +155,67 @@ where
         // Sorted candidates: the gradient accumulation then walks memory in order.
         out[start..].sort_unstable();
         stats.seconds += t.elapsed().as_secs_f64();
+    }
+
+    /// The [`ANCHORS`] deepest points among `near` (largest distance to the boundary) that lie
+    /// within `3 sigma` of `o`: their boundary-free balls help cover segments from `o`.
+    fn anchors(&self, o: &[f64; D], near: &[usize]) -> Vec<([f64; D], f64)> {
+        let r2 = self.support() * self.support();
+        let mut best: Vec<(f64, usize)> = Vec::with_capacity(ANCHORS + 1);
+        for &i in near {
+            let d = self.dist[i];
+            if best.len() == ANCHORS && d <= best[ANCHORS - 1].0 {
+                continue;
+            }
+            if dist2(o, &self.x[i]) > r2 {
+                continue;
+            }
+            let pos = best.partition_point(|b| b.0 >= d);
+            best.insert(pos, (d, i));
+            best.truncate(ANCHORS);
+        }
+        best.into_iter().map(|(d, i)| (self.x[i], d)).collect()
+    }
+
+    /// True if the segment `o -> x_i` lies in the union of the boundary-free open balls
+    /// `B(o, d_o)`, `B(x_i, d_i)` and those of the anchors, so that it cannot cross the
+    /// boundary (exact, conservative: `false` only means a ray is needed).
+    #[inline]
+    fn covered(&self, o: &[f64; D], d_o: f64, i: usize, anchors: &[([f64; D], f64)]) -> bool {
+        let x = &self.x[i];
+        let l = dist2(o, x).sqrt();
+        let d_i = self.dist[i];
+        if l < d_o + d_i {
+            return true;
+        }
+        // Sweep the balls' intervals along the segment (parameter t in [0, l]).
+        let u: [f64; D] = std::array::from_fn(|k| (x[k] - o[k]) / l);
+        let mut iv: [(f64, f64); ANCHORS] = [(f64::INFINITY, f64::INFINITY); ANCHORS];
+        let mut m = 0;
+        for (c, r) in anchors {
+            let w: [f64; D] = std::array::from_fn(|k| c[k] - o[k]);
+            let b = super::dot(&w, &u);
+            let disc = r * r - (super::norm2(&w) - b * b);
+            if disc > 0.0 {
+                let s = disc.sqrt();
+                iv[m] = (b - s, b + s);
+                m += 1;
+            }
+        }
+        iv[..m].sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+        // Reach of the covered prefix, starting with B(o, d_o); 0.999 keeps the open-ball
+        // intervals strictly overlapping under rounding.
+        let mut reach = 0.999 * d_o;
+        let goal = l - 0.999 * d_i;
+        for &(a, b) in &iv[..m] {
+            if reach >= goal {
+                break;
+            }
+            if a < reach {
+                reach = reach.max(b - 1e-3 * (b - a));
+            }
+        }
+        reach >= goal
     }
 
     /// Truncated Gaussian weights (eq. 3) at `z` of the candidates `cand`, into `k`
