@@ -169,3 +169,164 @@ def test_woody_matches_fem():
     W = fld.vertex_weights()
     _check_rows(W)
     assert _stats("woody-2d surface vs bbw_dual", W[surf], Wfem[surf]) <= 0.03
+
+
+def test_hand_surface_matches_fem(data_dir):
+    """hand-403, schedule 150 steps, 2^10 -> 2^11 points, M = 2^10, interior sampled from the
+    tet mesh (paper: 6000 steps, 2^13 -> 2^16, 2^11)."""
+    d = np.load(REF / "hand.npz")
+    V, T, C, BE = d["V"], d["T"], d["C"], d["BE"]
+    _, _, F = io.read_mesh(data_dir / "hand-403" / "hand.mesh")
+    Wfem = skinrs.bbw_dual(V, T, C, BE=BE)
+    surf = np.unique(F)
+    fld = skinrs.GeometricField(
+        V, F, C, BE=BE, tets=T, steps=150, n_points=1024, samples=1024, upsamples=1, pool=1 << 15
+    )
+    fld.optimize()
+    W = fld.vertex_weights()
+    _check_rows(W)
+    assert _stats("hand-403 surface vs bbw_dual", W[surf], Wfem[surf]) <= 0.03
+
+
+# --- robustness -------------------------------------------------------------------------------
+
+ROBUST = dict(steps=120, n_points=1024, samples=512, upsamples=1, pool=1 << 14)
+
+
+def _inside_handles(V, F, n, rng, wn_min=0.5):
+    """``n`` far-apart points with winding number > wn_min (farthest-point sampling)."""
+    Q = rng.uniform(V.min(0), V.max(0), size=(40000, 3))
+    Q = Q[skinrs.winding_number(V, F, Q) > wn_min]
+    assert len(Q) > n
+    H = [Q[0]]
+    for _ in range(n - 1):
+        d = np.min(np.linalg.norm(Q[:, None] - np.array(H)[None], axis=2), axis=1)
+        H.append(Q[np.argmax(d)])
+    return np.array(H)
+
+
+def _check_field(fld, W, handle_points):
+    _check_rows(W)
+    np.testing.assert_array_equal(fld.evaluate(handle_points), np.eye(len(handle_points)))
+
+
+def test_rignet_smith_polygon_soup(data_dir):
+    V, F = io.read_obj(data_dir / "rignet-smith" / "smith_ori.obj")
+    rig = io.read_rignet_rig(data_dir / "rignet-smith" / "smith_ori_rig.txt")
+    C, BE = rig["C"], rig["BE"]
+    fld = skinrs.GeometricField(V, F, C, BE=BE, **ROBUST)
+    fld.optimize()
+    W, status = fld.vertex_weights(return_status=True)
+    print("smith vertex status counts (direct, no-vis, nearest, flood):", np.bincount(status))
+    _check_rows(W)
+    # One-hot on every bone point farther than the mollifier radius from all other bones
+    # (RigNet's bones share joints and overlap near the hips).
+    eps = 0.5 * fld.info()["sigma"]
+    Q, cols = _lonely_bone_points(C, BE, eps)
+    print(f"smith: {len(set(cols))} of {len(BE)} bones have points away from the others")
+    assert len(set(cols)) >= len(BE) // 2
+    np.testing.assert_array_equal(fld.evaluate(Q), np.eye(len(BE))[cols])
+
+
+def _segment_distance(Q, a, b):
+    t = np.clip(((Q - a) @ (b - a)) / max((b - a) @ (b - a), 1e-300), 0, 1)
+    return np.linalg.norm(Q - (a + t[:, None] * (b - a)), axis=1)
+
+
+def _lonely_bone_points(C, BE, eps):
+    """Points on each bone at distance > eps from every other bone, with their column."""
+    Q, cols = [], []
+    t = np.linspace(0, 1, 41)[:, None]
+    for e, (i, j) in enumerate(BE):
+        P = C[i] + t * (C[j] - C[i])
+        others = [_segment_distance(P, C[a], C[b]) for k, (a, b) in enumerate(BE) if k != e]
+        ok = np.min(others, axis=0) > eps if others else np.ones(len(P), bool)
+        Q += list(P[ok])
+        cols += [e] * int(ok.sum())
+    return np.array(Q), np.array(cols)
+
+
+@pytest.mark.parametrize("case", ["truck-soup/truck.obj", "plane/plane_holes.obj"])
+def test_soup_and_open_mesh_with_point_handles(data_dir, case):
+    V, F = io.read_obj(data_dir / case)
+    H = _inside_handles(V, F, 3, np.random.default_rng(0))
+    fld = skinrs.GeometricField(V, F, H, P=[0, 1, 2], **ROBUST)
+    fld.optimize()
+    W, status = fld.vertex_weights(return_status=True)
+    print(case, "vertex status counts (direct, no-vis, nearest, flood):", np.bincount(status))
+    _check_field(fld, W, H)
+
+
+def _degrade(V, F, rng, drop=0.3, jitter=2e-3):
+    """Delete ``drop`` of the faces, jitter the vertices by ``jitter`` * bbox diagonal."""
+    keep = rng.random(len(F)) >= drop
+    diag = np.linalg.norm(V.max(0) - V.min(0))
+    return V + rng.normal(scale=jitter * diag, size=V.shape), F[keep]
+
+
+def test_degraded_arm_close_to_clean_arm(data_dir):
+    V, F = io.read_obj(data_dir / "arm" / "arm.obj")
+    C, BE = io.read_tgf(data_dir / "arm" / "arm.tgf")
+    rng = np.random.default_rng(3)
+    Vd, Fd = _degrade(V, F, rng)
+    opts = dict(ROBUST, steps=200)
+    Wc = skinrs.bbw_field(V, F, C, BE=BE, **opts)
+    fld = skinrs.GeometricField(Vd, Fd, C, BE=BE, **opts)
+    fld.optimize()
+    Wd, status = fld.vertex_weights(return_status=True)
+    print("degraded arm vertex status counts (direct, no-vis, nearest, flood):", np.bincount(status))
+    _check_rows(Wc)
+    _check_rows(Wd)
+    used = np.unique(Fd)
+    assert _stats("degraded arm vs clean arm", Wd[used], Wc[used]) <= 0.1
+
+
+# --- bad input --------------------------------------------------------------------------------
+
+
+def test_bad_input_is_a_clear_value_error():
+    V, E, C, BE, _, _ = _u_shape()
+    small = dict(n_points=64, samples=64, pool=512, steps=1)
+    with pytest.raises(ValueError, match="outside the shape"):
+        skinrs.GeometricField(V, E, C + 5.0, BE=BE, **small)
+    with pytest.raises(ValueError, match="no handles"):
+        skinrs.GeometricField(V, E, C, **small)
+    with pytest.raises(ValueError, match="NaN"):
+        Vn = V.copy()
+        Vn[3, 1] = np.nan
+        skinrs.GeometricField(Vn, E, C, BE=BE, **small)
+    with pytest.raises(ValueError, match="at least 1 rows"):
+        skinrs.GeometricField(np.zeros((0, 2)), E[:0], C, BE=BE, **small)
+    with pytest.raises(ValueError, match="must not be empty"):
+        skinrs.GeometricField(V, np.zeros((0, 2), int), C, BE=BE, **small)
+    with pytest.raises(ValueError, match="shape"):
+        skinrs.GeometricField(V, E, C[:, :1], BE=BE, **small)
+    with pytest.raises(ValueError, match="integer"):
+        skinrs.GeometricField(V, E + 0.5, C, BE=BE, **small)
+    with pytest.raises(ValueError, match="BE"):
+        skinrs.GeometricField(V, E, C, BE=[[0, 9]], **small)
+    with pytest.raises(ValueError, match="unknown options"):
+        skinrs.GeometricField(V, E, C, BE=BE, step=3, **small)
+    with pytest.raises(ValueError, match="positive"):
+        skinrs.GeometricField(V, E, C, BE=BE, **dict(small, lr=-1.0))
+    with pytest.raises(ValueError, match="winding number is at most -1"):
+        # Inward-oriented boundary: the winding number is -1 inside.
+        skinrs.GeometricField(V, E[:, ::-1], C, BE=BE, **small)
+    fld = skinrs.GeometricField(V, E, C, BE=BE, **small)
+    with pytest.raises(ValueError, match="summing to 1"):
+        fld.paint(V[:2], [0.5, 0.6])
+    with pytest.raises(ValueError, match="shape"):
+        fld.evaluate(np.zeros((3, 3)))
+
+
+def test_point_cloud_without_faces():
+    rng = np.random.default_rng(0)
+    X = rng.uniform([0, 0], [2, 1], size=(3000, 2))
+    C = np.array([[0.2, 0.5], [1.8, 0.5]])
+    fld = skinrs.GeometricField(X, None, C, P=[0, 1], steps=60, n_points=512, samples=512,
+                                upsamples=0, pool=4096)
+    fld.optimize()
+    W = fld.vertex_weights()
+    _check_rows(W)
+    np.testing.assert_array_equal(fld.evaluate(C), np.eye(2))
+    assert W[X[:, 0] < 0.3, 0].mean() > 0.8 and W[X[:, 0] > 1.7, 1].mean() > 0.8
