@@ -50,7 +50,9 @@ def _u_shape(gap=0.01):
     """A "U" whose arms (width 0.3, height 1) are ``gap`` apart; one bone per arm."""
     w = 0.3
     xr, xe = w + gap, 2 * w + gap
-    V, E = _polygon([[0, 0], [xe, 0], [xe, 1], [xr, 1], [xr, 0.25], [w, 0.25], [w, 1], [0, 1]], 0.01)
+    V, E = _polygon(
+        [[0, 0], [xe, 0], [xe, 1], [xr, 1], [xr, 0.25], [w, 0.25], [w, 1], [0, 1]], 0.01
+    )
     C = np.array([[0.15, 0.3], [0.15, 0.95], [xr + 0.15, 0.3], [xr + 0.15, 0.95]])
     BE = np.array([[0, 1], [2, 3]])
     upper = V[:, 1] > 0.5
@@ -58,7 +60,7 @@ def _u_shape(gap=0.01):
     return V, E, C, BE, left, right
 
 
-U_OPTS = dict(steps=250, n_points=1024, samples=1024, upsamples=1, pool=1 << 15)
+U_OPTS = {"steps": 250, "n_points": 1024, "samples": 1024, "upsamples": 1, "pool": 1 << 15}
 
 
 @pytest.fixture(scope="module")
@@ -110,7 +112,7 @@ def test_gradient_matches_central_differences_3d_with_paint(data_dir):
 
 
 def test_rows_partition_of_unity_one_hot_and_paint(u_field):
-    fld, (V, E, C, BE, left, right) = u_field
+    fld, (V, E, C, BE, left, _right) = u_field
     rng = np.random.default_rng(0)
     Q = rng.uniform([0, 0], [0.61, 1], size=(2000, 2))
     for W in (fld.evaluate(Q), fld.vertex_weights()):
@@ -132,7 +134,7 @@ def test_rows_partition_of_unity_one_hot_and_paint(u_field):
 
 def test_deterministic_for_a_seed():
     V, E, C, BE, _, _ = _u_shape()
-    opts = dict(steps=30, n_points=256, samples=512, upsamples=1, pool=4096)
+    opts = {"steps": 30, "n_points": 256, "samples": 512, "upsamples": 1, "pool": 4096}
     W = [skinrs.bbw_field(V, E, C, BE=BE, seed=s, **opts) for s in (7, 7, 8)]
     np.testing.assert_array_equal(W[0], W[1])
     assert np.abs(W[0] - W[2]).max() > 0
@@ -156,14 +158,14 @@ def test_no_bleeding_across_a_narrow_gap(u_field):
 
 
 def test_woody_matches_fem():
-    """woody-2d, schedule 1000 steps, 2^10 -> 2^12 points, M = 2^11 (paper: 6000, 2^11 -> 2^14,
+    """woody-2d, schedule 600 steps, 2^10 -> 2^12 points, M = 2^11 (paper: 6000, 2^11 -> 2^14,
     2^12)."""
     d = np.load(REF / "woody.npz")
     V, T, C, BE = d["V"], d["T"], d["C"], d["BE"]
     Wfem = skinrs.bbw_dual(V, T, C, BE=BE)
     surf = np.unique(_boundary_edges_2d(V, T))
     fld = skinrs.GeometricField(
-        V, T, C, BE=BE, steps=1000, n_points=1024, samples=2048, upsamples=2, pool=1 << 16
+        V, T, C, BE=BE, steps=600, n_points=1024, samples=2048, upsamples=2, pool=1 << 16
     )
     fld.optimize()
     W = fld.vertex_weights()
@@ -190,7 +192,7 @@ def test_hand_surface_matches_fem(data_dir):
 
 # --- robustness -------------------------------------------------------------------------------
 
-ROBUST = dict(steps=120, n_points=1024, samples=512, upsamples=1, pool=1 << 14)
+ROBUST = {"steps": 120, "n_points": 1024, "samples": 512, "upsamples": 1, "pool": 1 << 14}
 
 
 def _inside_handles(V, F, n, rng, wn_min=0.5):
@@ -274,7 +276,9 @@ def test_degraded_arm_close_to_clean_arm(data_dir):
     fld = skinrs.GeometricField(Vd, Fd, C, BE=BE, **opts)
     fld.optimize()
     Wd, status = fld.vertex_weights(return_status=True)
-    print("degraded arm vertex status counts (direct, no-vis, nearest, flood):", np.bincount(status))
+    print(
+        "degraded arm vertex status counts (direct, no-vis, nearest, flood):", np.bincount(status)
+    )
     _check_rows(Wc)
     _check_rows(Wd)
     used = np.unique(Fd)
@@ -286,7 +290,7 @@ def test_degraded_arm_close_to_clean_arm(data_dir):
 
 def test_bad_input_is_a_clear_value_error():
     V, E, C, BE, _, _ = _u_shape()
-    small = dict(n_points=64, samples=64, pool=512, steps=1)
+    small = {"n_points": 64, "samples": 64, "pool": 512, "steps": 1}
     with pytest.raises(ValueError, match="outside the shape"):
         skinrs.GeometricField(V, E, C + 5.0, BE=BE, **small)
     with pytest.raises(ValueError, match="no handles"):
@@ -323,8 +327,9 @@ def test_point_cloud_without_faces():
     rng = np.random.default_rng(0)
     X = rng.uniform([0, 0], [2, 1], size=(3000, 2))
     C = np.array([[0.2, 0.5], [1.8, 0.5]])
-    fld = skinrs.GeometricField(X, None, C, P=[0, 1], steps=60, n_points=512, samples=512,
-                                upsamples=0, pool=4096)
+    fld = skinrs.GeometricField(
+        X, None, C, P=[0, 1], steps=60, n_points=512, samples=512, upsamples=0, pool=4096
+    )
     fld.optimize()
     W = fld.vertex_weights()
     _check_rows(W)

@@ -72,6 +72,7 @@ where
 
     /// Weights `alpha(z)` (eq. 7, with eq. 9 if enabled) of evaluation point `m` (0: y, 1: y+,
     /// 2: y-) into `sc.alpha[m*K..]`; false if `z` or `y`'s neighbourhood gives no value.
+    #[allow(clippy::needless_range_loop)]
     fn forward(&self, m: usize, z: &[f64; D], f: &[f64], sc: &mut Scratch) -> bool {
         let nk = self.k();
         let (first, rest) = sc.vals.split_at_mut(3);
@@ -100,6 +101,7 @@ where
     }
 
     /// Energy term of one sample (already scaled by `scale`), gradient added to `grad`.
+    #[allow(clippy::needless_range_loop)]
     fn term(
         &self,
         s: &McSample<D>,
@@ -114,9 +116,20 @@ where
         let r = ps.support() + self.h + self.neumann.unwrap_or(0.0);
         sc.cand.clear();
         let d_y = self.domain.dist(&s.y);
-        ps.visible_within(self.domain, &s.y, d_y, r, self.visibility, &mut sc.cand, stats);
         let hv = scale(&s.v, self.h);
         let z = [s.y, add(&s.y, &hv), sub(&s.y, &hv)];
+        // With Neumann conditions the closest boundary points are evaluated too: keep the ball.
+        let centres: &[[f64; D]] = if self.neumann.is_some() { &[] } else { &z };
+        ps.visible_within(
+            self.domain,
+            &s.y,
+            d_y,
+            r,
+            centres,
+            self.visibility,
+            &mut sc.cand,
+            stats,
+        );
         sc.alpha.resize(3 * nk, 0.0);
         for (m, zm) in z.iter().enumerate() {
             if !self.forward(m, zm, f, sc) {
@@ -186,18 +199,16 @@ where
             })
             .collect();
         let bufs = &*bufs;
-        grad.par_chunks_mut(4096)
-            .enumerate()
-            .for_each(|(b, out)| {
-                let o = b * 4096;
-                for (j, g) in out.iter_mut().enumerate() {
-                    let mut s = 0.0;
-                    for buf in bufs {
-                        s += buf[o + j];
-                    }
-                    *g = s;
+        grad.par_chunks_mut(4096).enumerate().for_each(|(b, out)| {
+            let o = b * 4096;
+            for (j, g) in out.iter_mut().enumerate() {
+                let mut s = 0.0;
+                for buf in bufs {
+                    s += buf[o + j];
                 }
-            });
+                *g = s;
+            }
+        });
         let mut stats = RayStats::default();
         let mut e = 0.0;
         for (pe, ps) in &parts {

@@ -26,7 +26,13 @@ where
     Boundary<D>: BoundaryQueries<D>,
 {
     /// Weights at `z` (unit box) with rays from `o`; false if no point is visible.
-    pub fn weights_at(&self, z: &[f64; D], o: &[f64; D], visibility: bool, out: &mut [f64]) -> bool {
+    pub fn weights_at(
+        &self,
+        z: &[f64; D],
+        o: &[f64; D],
+        visibility: bool,
+        out: &mut [f64],
+    ) -> bool {
         let mut val = FieldValue::default();
         if !self.alpha_hat(z, o, visibility, &mut val) {
             return false;
@@ -115,7 +121,8 @@ where
                 let z = vu[i];
                 let o: [f64; D] = std::array::from_fn(|c| z[c] - NUDGE * normals[i][c]);
                 let mut out = vec![0.0; k];
-                let inside = self.domain.winding.is_none() || self.domain.wn(&o) >= self.domain.wn_l;
+                let inside =
+                    self.domain.winding.is_none() || self.domain.wn(&o) >= self.domain.wn_l;
                 let ok = inside && self.weights_at(&z, &o, self.opts.visibility, &mut out);
                 (out, ok)
             })
@@ -179,7 +186,11 @@ fn flood_fill(w: &mut [Vec<f64>], status: &mut [u8], nb: &[Vec<usize>], k: usize
             if status[i] != 255 {
                 continue;
             }
-            let set: Vec<usize> = nb[i].iter().copied().filter(|&j| status[j] != 255).collect();
+            let set: Vec<usize> = nb[i]
+                .iter()
+                .copied()
+                .filter(|&j| status[j] != 255)
+                .collect();
             if set.is_empty() {
                 continue;
             }

@@ -89,7 +89,7 @@ where
         let mut s = kd.clone();
         s.sort_by(f64::total_cmp);
         let sigma = s[s.len() / 2];
-        if !(sigma > 0.0) {
+        if sigma.is_nan() || sigma <= 0.0 {
             return invalid!("the field's points coincide (sigma = 0)");
         }
         let dist = point_distances(&x, domain);
@@ -120,21 +120,28 @@ where
     /// Points within `r` of `o` that are visible from `o` (eq. 4), appended to `out`.
     ///
     /// Inputs: domain (its boundary blocks), o origin, d_o its distance to the boundary,
-    /// r radius, visibility (false: plain Gaussian kernel k_E, eq. 3).
+    /// r radius, centres (if not empty, only points within `3 sigma` of one of them are kept:
+    /// the others have zero kernel weight at every evaluation point), visibility (false: plain
+    /// Gaussian kernel k_E, eq. 3).
+    #[allow(clippy::too_many_arguments)]
     pub fn visible_within(
         &self,
         domain: &Domain<D>,
         o: &[f64; D],
         d_o: f64,
         r: f64,
+        centres: &[[f64; D]],
         visibility: bool,
         out: &mut Vec<u32>,
         stats: &mut RayStats,
     ) {
         let t = std::time::Instant::now();
-        let start = out.len();
         let mut near = Vec::new();
         self.grid.radius(o, r, &mut near);
+        if !centres.is_empty() {
+            let r2 = self.support() * self.support();
+            near.retain(|&i| centres.iter().any(|c| dist2(c, &self.x[i]) <= r2));
+        }
         stats.pairs += near.len() as u64;
         match (&domain.boundary, visibility) {
             (Some(b), true) => {
@@ -152,8 +159,6 @@ where
             }
             _ => out.extend(near.into_iter().map(|i| i as u32)),
         }
-        // Sorted candidates: the gradient accumulation then walks memory in order.
-        out[start..].sort_unstable();
         stats.seconds += t.elapsed().as_secs_f64();
     }
 
@@ -272,7 +277,7 @@ impl FieldValue {
         Boundary<D>: BoundaryQueries<D>,
     {
         let s = ps.weights(z, cand, &mut self.k);
-        if !(s > 0.0) {
+        if s.is_nan() || s <= 0.0 {
             return false;
         }
         let inv = 1.0 / s;
@@ -305,9 +310,7 @@ impl FieldValue {
         let nk = g.len();
         let ga: f64 = g.iter().zip(&self.alpha).map(|(a, b)| a * b).sum();
         u.clear();
-        u.extend(
-            (0..nk).map(|m| (g[m] - ga) / self.sp_sum * sigmoid(self.f[m])),
-        );
+        u.extend((0..nk).map(|m| (g[m] - ga) / self.sp_sum * sigmoid(self.f[m])));
         for (j, &i) in cand.iter().enumerate() {
             let w = self.k[j];
             if w == 0.0 {

@@ -70,7 +70,7 @@ impl<const D: usize> Constraints<D> {
         }
         for (r, row) in w.chunks(self.k).enumerate() {
             let s: f64 = row.iter().sum();
-            if row.iter().any(|&x| !(x >= 0.0)) || (s - 1.0).abs() > 1e-9 {
+            if row.iter().any(|&x| x.is_nan() || x < 0.0) || (s - 1.0).abs() > 1e-9 {
                 return invalid!("painted weight row {r} must be >= 0 and sum to 1 (sums to {s})");
             }
         }

@@ -160,11 +160,7 @@ where
             .into_iter()
             .map(|(a, b, c)| (to_unit(&a, &offset, scale), to_unit(&b, &offset, scale), c))
             .collect();
-        let cloud_r = if f.is_none() {
-            cloud_radius(&vu)?
-        } else {
-            0.0
-        };
+        let cloud_r = if f.is_none() { cloud_radius(&vu)? } else { 0.0 };
         let mut domain = Domain::<D>::new(vu.view(), f, simplices, cloud_r, opts.wn_l, opts.wn_h)?;
         check_handles(&domain, &handles, k)?;
         let (pool, tries) = domain.sample(opts.pool, opts.seed, u64::MAX)?;
@@ -276,7 +272,9 @@ where
             let t = std::time::Instant::now();
             let samples = self.samples(self.step as u64);
             let mut bufs = std::mem::take(&mut self.bufs);
-            let (e, rs) = self.problem().energy(&samples, &self.f, &mut grad, &mut bufs);
+            let (e, rs) = self
+                .problem()
+                .energy(&samples, &self.f, &mut grad, &mut bufs);
             self.bufs = bufs;
             self.stats.seconds_energy += t.elapsed().as_secs_f64();
             self.stats.rays.add(&rs);
@@ -306,9 +304,9 @@ where
     pub fn upsample(&mut self) -> SkinResult<()> {
         self.level += 1;
         let n_new = self.points.len();
-        let (news, _) =
-            self.domain
-                .sample(n_new, self.opts.seed, 1_000_000 + self.level as u64)?;
+        let (news, _) = self
+            .domain
+            .sample(n_new, self.opts.seed, 1_000_000 + self.level as u64)?;
         let xs: Vec<[f64; D]> = news.iter().map(|s| s.x).collect();
         let k = self.k();
         let mut f = self.f.clone();
@@ -349,13 +347,14 @@ where
                     x,
                     d,
                     ps.support(),
+                    &[],
                     self.opts.visibility,
                     &mut cand,
                     &mut st,
                 );
                 let mut kw = Vec::new();
                 let s = ps.weights(x, &cand, &mut kw);
-                if !(s > 0.0) {
+                if s.is_nan() || s <= 0.0 {
                     cand = vec![ps.grid.knn(x, 1, None)[0].1 as u32];
                     kw = vec![1.0];
                 }
@@ -398,7 +397,7 @@ where
             f64::INFINITY
         };
         let r = ps.support() + super::sampling::dist2(z, o).sqrt();
-        ps.visible_within(&self.domain, o, d, r, visibility, &mut cand, &mut st);
+        ps.visible_within(&self.domain, o, d, r, &[], visibility, &mut cand, &mut st);
         val.eval(ps, z, &cand, &self.f, self.k())
     }
 }

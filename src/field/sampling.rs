@@ -90,7 +90,7 @@ where
         wn_l: f64,
         wn_h: f64,
     ) -> SkinResult<Self> {
-        if !(wn_l < wn_h) {
+        if wn_l.is_nan() || wn_h.is_nan() || wn_l >= wn_h {
             return invalid!("wn_l must be smaller than wn_h, got {wn_l} and {wn_h}");
         }
         let verts: Vec<[f64; D]> = (0..v.nrows()).map(|i| super::row(&v, i)).collect();
@@ -151,7 +151,9 @@ where
     /// Distance from `x` to the boundary (infinite without one).
     #[inline]
     pub fn dist(&self, x: &[f64; D]) -> f64 {
-        self.boundary.as_ref().map_or(f64::INFINITY, |b| b.closest(x).dist)
+        self.boundary
+            .as_ref()
+            .map_or(f64::INFINITY, |b| b.closest(x).dist)
     }
 
     /// One uniform interior sample from `rng`, or `None` after [`MAX_ATTEMPTS`] rejections.
@@ -259,7 +261,7 @@ fn simplex_interior<const D: usize>(
         elems.push(e);
         cdf.push(acc);
     }
-    if !(acc > 0.0) {
+    if acc.is_nan() || acc <= 0.0 {
         return invalid!("the interior mesh has zero volume");
     }
     Ok(Interior::Simplices {
@@ -299,6 +301,8 @@ mod tests {
         let d = Domain::<2>::new(v.view(), Some(f.view()), Some(t.view()), 0.0, 0.1, 0.25).unwrap();
         assert!((d.volume - 1.0).abs() < 1e-12);
         let (s, _) = d.sample(1000, 3, 0).unwrap();
-        assert!(s.iter().all(|p| (0.0..=1.0).contains(&p.x[0]) && p.weight == 1.0));
+        assert!(s
+            .iter()
+            .all(|p| (0.0..=1.0).contains(&p.x[0]) && p.weight == 1.0));
     }
 }

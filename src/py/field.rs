@@ -214,7 +214,11 @@ fn handles<const D: usize>(
     be: &Array2<usize>,
 ) -> Vec<([f64; D], [f64; D], usize)> {
     let pt = |i: usize| -> [f64; D] { std::array::from_fn(|k| c[[i, k]]) };
-    let mut h: Vec<_> = p.iter().enumerate().map(|(j, &i)| (pt(i), pt(i), j)).collect();
+    let mut h: Vec<_> = p
+        .iter()
+        .enumerate()
+        .map(|(j, &i)| (pt(i), pt(i), j))
+        .collect();
     for (e, r) in be.rows().into_iter().enumerate() {
         h.push((pt(r[0]), pt(r[1]), p.len() + e));
     }
@@ -258,7 +262,9 @@ impl PyGeometricField {
             .iter()
             .map(|&i| {
                 if i < 0 || i as usize >= cc.nrows() {
-                    Err(PyValueError::new_err(format!("P holds index {i} outside C")))
+                    Err(PyValueError::new_err(format!(
+                        "P holds index {i} outside C"
+                    )))
                 } else {
                     Ok(i as usize)
                 }
@@ -376,8 +382,8 @@ impl PyGeometricField {
         let (e, g) = py
             .detach(|| guard(|| with_field!(inner, g, g.energy_at(&flat, step))))
             .map_err(to_pyerr)?;
-        let g = Array2::from_shape_vec((n, k), g)
-            .map_err(|e| PyValueError::new_err(e.to_string()))?;
+        let g =
+            Array2::from_shape_vec((n, k), g).map_err(|e| PyValueError::new_err(e.to_string()))?;
         Ok((e, g.into_pyarray(py)))
     }
 
