@@ -60,7 +60,7 @@ def _u_shape(gap=0.01):
     return V, E, C, BE, left, right
 
 
-U_OPTS = {"steps": 250, "n_points": 1024, "samples": 1024, "upsamples": 1, "pool": 1 << 15}
+U_OPTS = {"steps": 250, "n_points": 1024, "samples": 1024, "upsamples": 1, "pool": 1 << 13}
 
 
 @pytest.fixture(scope="module")
@@ -165,7 +165,7 @@ def test_woody_matches_fem():
     Wfem = skinrs.bbw_dual(V, T, C, BE=BE)
     surf = np.unique(_boundary_edges_2d(V, T))
     fld = skinrs.GeometricField(
-        V, T, C, BE=BE, steps=600, n_points=1024, samples=2048, upsamples=2, pool=1 << 16
+        V, T, C, BE=BE, steps=600, n_points=1024, samples=2048, upsamples=2, pool=1 << 14
     )
     fld.optimize()
     W = fld.vertex_weights()
@@ -182,7 +182,7 @@ def test_hand_surface_matches_fem(data_dir):
     Wfem = skinrs.bbw_dual(V, T, C, BE=BE)
     surf = np.unique(F)
     fld = skinrs.GeometricField(
-        V, F, C, BE=BE, tets=T, steps=150, n_points=1024, samples=1024, upsamples=1, pool=1 << 15
+        V, F, C, BE=BE, tets=T, steps=150, n_points=1024, samples=1024, upsamples=1, pool=1 << 13
     )
     fld.optimize()
     W = fld.vertex_weights()
@@ -192,7 +192,7 @@ def test_hand_surface_matches_fem(data_dir):
 
 # --- robustness -------------------------------------------------------------------------------
 
-ROBUST = {"steps": 120, "n_points": 1024, "samples": 512, "upsamples": 1, "pool": 1 << 14}
+ROBUST = {"steps": 120, "n_points": 1024, "samples": 512, "upsamples": 1, "pool": 1 << 13}
 
 
 def _inside_handles(V, F, n, rng, wn_min=0.5):

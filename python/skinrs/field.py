@@ -202,7 +202,10 @@ FIELD_OPTIONS = {
     "visibility": "visibility-aware kernel k_RT (True); False gives the plain Gaussian k_E",
     "wn_l": "winding-number rejection threshold (0.1)",
     "wn_h": "winding-number full-weight threshold (0.25)",
-    "pool": "interior samples drawn once; every step draws its M samples from them (2^18)",
+    "pool": "interior samples drawn once; every step draws its M samples from them "
+    "(2^17 in 2D, 2^16 in 3D)",
+    "cache_visibility": "cache the visible points of each pool sample (True; exact)",
+    "skip_rays": "skip rays covered by boundary-free balls (True; exact, False to measure)",
     "resume_steps": "steps of optimize() once the schedule is complete, e.g. after paint (1500)",
 }
 
@@ -352,8 +355,9 @@ class GeometricField:
         for key in ("beta1", "beta2", "wn_l", "wn_h"):
             if key in options:
                 options[key] = float(options[key])
-        if "visibility" in options:
-            options["visibility"] = bool(options["visibility"])
+        for key in ("visibility", "cache_visibility", "skip_rays"):
+            if key in options:
+                options[key] = bool(options[key])
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
             raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
         options.update(neumann=bool(neumann), seed=int(seed))

@@ -33,7 +33,14 @@ pub struct McSample<const D: usize> {
     pub y: [f64; D],
     pub v: [f64; D],
     pub weight: f64,
+    /// Index of `y` in the sample pool (key of the visibility cache).
+    pub pool: usize,
 }
+
+/// Per pool sample, the points visible from it within the candidate radius, computed on first
+/// use. Visibility depends only on `y` and the point set, so the cache is exact; it is reset
+/// whenever the point set changes.
+pub type VisibilityCache = Vec<std::sync::OnceLock<Box<[u32]>>>;
 
 /// Everything the energy needs besides the parameters.
 pub struct Problem<'a, const D: usize> {
@@ -46,6 +53,8 @@ pub struct Problem<'a, const D: usize> {
     pub neumann: Option<f64>,
     /// Visibility-aware kernel (eq. 4); false gives the plain Gaussian (eq. 3).
     pub visibility: bool,
+    /// Visibility cache over the sample pool, if enabled.
+    pub cache: Option<&'a VisibilityCache>,
 }
 
 /// Reused per-chunk memory.
@@ -115,21 +124,43 @@ where
         let ps = self.points;
         let r = ps.support() + self.h + self.neumann.unwrap_or(0.0);
         sc.cand.clear();
-        let d_y = self.domain.dist(&s.y);
         let hv = scale(&s.v, self.h);
         let z = [s.y, add(&s.y, &hv), sub(&s.y, &hv)];
         // With Neumann conditions the closest boundary points are evaluated too: keep the ball.
         let centres: &[[f64; D]] = if self.neumann.is_some() { &[] } else { &z };
-        ps.visible_within(
-            self.domain,
-            &s.y,
-            d_y,
-            r,
-            centres,
-            self.visibility,
-            &mut sc.cand,
-            stats,
-        );
+        match self.cache.and_then(|c| c.get(s.pool)) {
+            Some(cell) => {
+                let all = cell.get_or_init(|| {
+                    let mut v = Vec::new();
+                    let d_y = self.domain.dist(&s.y);
+                    ps.visible_within(
+                        self.domain,
+                        &s.y,
+                        d_y,
+                        r,
+                        &[],
+                        self.visibility,
+                        &mut v,
+                        stats,
+                    );
+                    v.into_boxed_slice()
+                });
+                ps.keep_near(all, centres, &mut sc.cand);
+            }
+            None => {
+                let d_y = self.domain.dist(&s.y);
+                ps.visible_within(
+                    self.domain,
+                    &s.y,
+                    d_y,
+                    r,
+                    centres,
+                    self.visibility,
+                    &mut sc.cand,
+                    stats,
+                );
+            }
+        }
         sc.alpha.resize(3 * nk, 0.0);
         for (m, zm) in z.iter().enumerate() {
             if !self.forward(m, zm, f, sc) {

@@ -47,6 +47,8 @@ pub struct PointSet<const D: usize> {
     pub dist: Vec<f64>,
     pub sigma: f64,
     pub grid: HashGrid<D>,
+    /// Use the boundary-free balls to skip rays (see the module doc); false traces every pair.
+    pub skip_rays: bool,
 }
 
 /// Deepest neighbours whose boundary-free balls are tried before tracing a ray.
@@ -100,6 +102,7 @@ where
             dist,
             sigma,
             grid,
+            skip_rays: true,
         })
     }
 
@@ -145,9 +148,13 @@ where
         stats.pairs += near.len() as u64;
         match (&domain.boundary, visibility) {
             (Some(b), true) => {
-                let anchors = self.anchors(o, &near);
+                let anchors = if self.skip_rays {
+                    self.anchors(o, &near)
+                } else {
+                    Vec::new()
+                };
                 for i in near {
-                    if self.covered(o, d_o, i, &anchors) {
+                    if self.skip_rays && self.covered(o, d_o, i, &anchors) {
                         out.push(i as u32);
                         continue;
                     }
@@ -160,6 +167,21 @@ where
             _ => out.extend(near.into_iter().map(|i| i as u32)),
         }
         stats.seconds += t.elapsed().as_secs_f64();
+    }
+
+    /// Appends to `out` the points of `all` within `3 sigma` of one of `centres` (all of them
+    /// if `centres` is empty).
+    pub fn keep_near(&self, all: &[u32], centres: &[[f64; D]], out: &mut Vec<u32>) {
+        if centres.is_empty() {
+            out.extend_from_slice(all);
+            return;
+        }
+        let r2 = self.support() * self.support();
+        out.extend(
+            all.iter()
+                .copied()
+                .filter(|&i| centres.iter().any(|c| dist2(c, &self.x[i as usize]) <= r2)),
+        );
     }
 
     /// The [`ANCHORS`] deepest points among `near` (largest distance to the boundary) that lie

@@ -204,6 +204,8 @@ fn options(d: usize, o: &Bound<'_, PyDict>) -> PyResult<FieldOptions> {
         wn_h: opt(o, "wn_h", x.wn_h)?,
         seed: opt(o, "seed", x.seed)?,
         pool: opt(o, "pool", x.pool)?,
+        cache_visibility: opt(o, "cache_visibility", x.cache_visibility)?,
+        skip_rays: opt(o, "skip_rays", x.skip_rays)?,
     })
 }
 
