@@ -335,3 +335,21 @@ def test_point_cloud_without_faces():
     _check_rows(W)
     np.testing.assert_array_equal(fld.evaluate(C), np.eye(2))
     assert W[X[:, 0] < 0.3, 0].mean() > 0.8 and W[X[:, 0] > 1.7, 1].mean() > 0.8
+
+
+def test_progress_callback_can_stop_and_resume():
+    V, E, C, BE, _, _ = _u_shape()
+    fld = skinrs.GeometricField(V, E, C, BE=BE, n_points=256, samples=256, pool=2048, steps=50)
+    seen = []
+
+    def cb(stage, step, energy):
+        seen.append((stage, step, energy))
+        return False
+
+    with pytest.raises(KeyboardInterrupt):
+        fld.optimize(callback=cb)
+    assert seen and seen[0][0] == "optimize" and np.isfinite(seen[0][2])
+    done = fld.info()["step"]
+    assert 1 <= done < 50
+    fld.optimize()  # resumes to the end of the schedule
+    assert fld.info()["step"] == 50

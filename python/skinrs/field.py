@@ -379,10 +379,6 @@ class GeometricField:
             ``callback(stage, step, energy)`` about every 0.1 s (stage ``"optimize"``);
             returning ``False`` stops (raises ``KeyboardInterrupt``); Ctrl-C also stops, and
             the field keeps the steps done so far.
-
-        Returns
-        -------
-        self
         """
         if steps is not None:
             steps = _checks.positive_int(steps, "steps")

@@ -130,6 +130,14 @@ where
         let mut w: Vec<Vec<f64>> = first.iter().map(|r| r.0.clone()).collect();
         let mut status: Vec<u8> = first.iter().map(|r| if r.1 { 0 } else { 255 }).collect();
         flood_fill(&mut w, &mut status, &neighbours(n, adj), k);
+        // Flood-filled rows get the mollifier of their own position (eq. 7): handles and paint
+        // stay exact there too, and rows still sum to 1.
+        for i in 0..n {
+            if status[i] == 3 {
+                let a = w[i].clone();
+                self.finish(&vu[i], &a, &mut w[i]);
+            }
+        }
         for i in 0..n {
             if status[i] == 255 {
                 let z = vu[i];

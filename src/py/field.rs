@@ -426,6 +426,7 @@ impl PyGeometricField {
             d.set_item("time_energy", g.stats.seconds_energy)?;
             d.set_item("time_optimize", g.stats.seconds_total)?;
             d.set_item("n_painted", g.cons.painted.len())?;
+            d.set_item("pool", g.pool.len())?;
             d.set_item("schedule_steps", g.opts.steps)?;
         });
         Ok(d)
