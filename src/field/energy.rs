@@ -19,7 +19,7 @@
 
 use rayon::prelude::*;
 
-use super::kernel::{FieldValue, PointSet, RayStats};
+use super::kernel::{backward3, eval3, FieldValue, PointSet, RayStats};
 use super::mollifier::{bump, Constraints};
 use super::sampling::Domain;
 use super::{add, scale, sub, Boundary, BoundaryQueries};
@@ -80,14 +80,11 @@ where
     }
 
     /// Weights `alpha(z)` (eq. 7, with eq. 9 if enabled) of evaluation point `m` (0: y, 1: y+,
-    /// 2: y-) into `sc.alpha[m*K..]`; false if `z` or `y`'s neighbourhood gives no value.
+    /// 2: y-) into `sc.alpha[m*K..]` from `alpha_hat(z)` in `sc.vals[m]` ([`eval3`]).
     #[allow(clippy::needless_range_loop)]
-    fn forward(&self, m: usize, z: &[f64; D], f: &[f64], sc: &mut Scratch) -> bool {
+    fn forward(&self, m: usize, z: &[f64; D], f: &[f64], sc: &mut Scratch) {
         let nk = self.k();
         let (first, rest) = sc.vals.split_at_mut(3);
-        if !first[m].eval(self.points, z, &sc.cand, f, nk) {
-            return false;
-        }
         sc.wn[m] = 0.0;
         if let (Some(eps), Some(b)) = (self.neumann, &self.domain.boundary) {
             let c = b.closest(z);
@@ -106,7 +103,6 @@ where
             }
             out[kk] = sc.e[kk] + (1.0 - sc.se[m]) * a;
         }
-        true
     }
 
     /// Energy term of one sample (already scaled by `scale`), gradient added to `grad`.
@@ -162,10 +158,11 @@ where
             }
         }
         sc.alpha.resize(3 * nk, 0.0);
+        if !eval3(&mut sc.vals[..3], ps, &z, &sc.cand, f, nk) {
+            return 0.0;
+        }
         for (m, zm) in z.iter().enumerate() {
-            if !self.forward(m, zm, f, sc) {
-                return 0.0;
-            }
+            self.forward(m, zm, f, sc);
         }
         let ih2 = 1.0 / (self.h * self.h);
         let coef = [-2.0, 1.0, 1.0];
@@ -180,14 +177,17 @@ where
             }
         }
         // Backward: alpha = e~ + (1 - sum e~) ((1 - w) alpha_hat(z) + w alpha_hat(p)).
+        let mut g3 = vec![0.0; 3 * nk];
+        for m in 0..3 {
+            let a = (1.0 - sc.se[m]) * (1.0 - sc.wn[m]);
+            for kk in 0..nk {
+                g3[m * nk + kk] = a * sc.g[m * nk + kk];
+            }
+        }
+        backward3(&sc.vals[..3], &sc.cand, &g3, grad, &mut sc.u);
         let mut gm = vec![0.0; nk];
         for m in 0..3 {
             let w = sc.wn[m];
-            let a = (1.0 - sc.se[m]) * (1.0 - w);
-            for kk in 0..nk {
-                gm[kk] = a * sc.g[m * nk + kk];
-            }
-            sc.vals[m].backward(&sc.cand, &gm, grad, &mut sc.u);
             if w > 0.0 {
                 let a = (1.0 - sc.se[m]) * w;
                 for kk in 0..nk {

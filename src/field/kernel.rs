@@ -316,6 +316,12 @@ impl FieldValue {
                 *a += w * b;
             }
         }
+        self.finish_softplus();
+        true
+    }
+
+    /// `alpha = softplus(f) / sum softplus(f)` from `self.f` (eq. 14, Sec. 4.2).
+    fn finish_softplus(&mut self) {
         self.alpha.clear();
         self.alpha.extend(self.f.iter().map(|&t| softplus(t)));
         self.sp_sum = self.alpha.iter().sum();
@@ -323,7 +329,6 @@ impl FieldValue {
         for a in self.alpha.iter_mut() {
             *a *= inv;
         }
-        true
     }
 
     /// Back-propagates `g = dE / d alpha_hat(z)` (K values) into `grad` (N by K, row-major):
@@ -342,6 +347,95 @@ impl FieldValue {
             for (a, &b) in row.iter_mut().zip(u.iter()) {
                 *a += w * b;
             }
+        }
+    }
+}
+
+/// [`FieldValue::eval`] at the three points `z` of one Laplacian stencil (eq. 13), which share
+/// their candidates: one pass over the candidates reads each parameter row once. Returns false
+/// if some point has no candidate with weight.
+pub fn eval3<const D: usize>(
+    vals: &mut [FieldValue],
+    ps: &PointSet<D>,
+    z: &[[f64; D]; 3],
+    cand: &[u32],
+    f: &[f64],
+    nk: usize,
+) -> bool
+where
+    Boundary<D>: BoundaryQueries<D>,
+{
+    let r2 = ps.support() * ps.support();
+    let c = -0.5 / (ps.sigma * ps.sigma);
+    let mut sum = [0.0f64; 3];
+    for v in vals.iter_mut().take(3) {
+        v.k.clear();
+        v.f.clear();
+        v.f.resize(nk, 0.0);
+    }
+    let (v0, rest) = vals.split_at_mut(1);
+    let (v1, v2) = rest.split_at_mut(1);
+    let (v0, v1, v2) = (&mut v0[0], &mut v1[0], &mut v2[0]);
+    for &i in cand {
+        let x = &ps.x[i as usize];
+        let w: [f64; 3] = std::array::from_fn(|m| {
+            let d2 = dist2(&z[m], x);
+            if d2 <= r2 {
+                (c * d2).exp()
+            } else {
+                0.0
+            }
+        });
+        v0.k.push(w[0]);
+        v1.k.push(w[1]);
+        v2.k.push(w[2]);
+        if w[0] == 0.0 && w[1] == 0.0 && w[2] == 0.0 {
+            continue;
+        }
+        for m in 0..3 {
+            sum[m] += w[m];
+        }
+        let row = &f[i as usize * nk..(i as usize + 1) * nk];
+        let f12 = v1.f.iter_mut().zip(v2.f.iter_mut());
+        for ((a0, (a1, a2)), &a) in v0.f.iter_mut().zip(f12).zip(row) {
+            *a0 += w[0] * a;
+            *a1 += w[1] * a;
+            *a2 += w[2] * a;
+        }
+    }
+    for (m, v) in [v0, v1, v2].into_iter().enumerate() {
+        if sum[m].is_nan() || sum[m] <= 0.0 {
+            return false;
+        }
+        let inv = 1.0 / sum[m];
+        v.k.iter_mut().for_each(|w| *w *= inv);
+        v.f.iter_mut().for_each(|a| *a *= inv);
+        v.finish_softplus();
+    }
+    true
+}
+
+/// [`FieldValue::backward`] of the three stencil points at once: `g` holds their three
+/// K-vectors `dE / d alpha_hat(z_m)` back to back; each gradient row is touched once.
+pub fn backward3(vals: &[FieldValue], cand: &[u32], g: &[f64], grad: &mut [f64], u: &mut Vec<f64>) {
+    let nk = g.len() / 3;
+    u.clear();
+    for (m, v) in vals.iter().take(3).enumerate() {
+        let gm = &g[m * nk..(m + 1) * nk];
+        let ga: f64 = gm.iter().zip(&v.alpha).map(|(a, b)| a * b).sum();
+        u.extend((0..nk).map(|kk| (gm[kk] - ga) / v.sp_sum * sigmoid(v.f[kk])));
+    }
+    let (u0, rest) = u.split_at(nk);
+    let (u1, u2) = rest.split_at(nk);
+    for (j, &i) in cand.iter().enumerate() {
+        let w = [vals[0].k[j], vals[1].k[j], vals[2].k[j]];
+        if w[0] == 0.0 && w[1] == 0.0 && w[2] == 0.0 {
+            continue;
+        }
+        let row = &mut grad[i as usize * nk..(i as usize + 1) * nk];
+        let u12 = u1.iter().zip(u2);
+        for ((r, a0), (a1, a2)) in row.iter_mut().zip(u0).zip(u12) {
+            *r += w[0] * a0 + w[1] * a1 + w[2] * a2;
         }
     }
 }

@@ -173,7 +173,9 @@ where
         let (pool, tries) = domain.sample(opts.pool, opts.seed, u64::MAX)?;
         domain.estimate_volume(pool.len(), tries);
         let (x0, _) = domain.sample(opts.n_init, opts.seed, 1_000_000)?;
-        let points = PointSet::new(x0.iter().map(|s| s.x).collect(), &domain)?;
+        let x0: Vec<[f64; D]> = x0.iter().map(|s| s.x).collect();
+        let x0 = permute(&x0, &spatial_order(&x0), 1);
+        let points = PointSet::new(x0, &domain)?;
         let sigma0 = points.sigma;
         let cons = Constraints::new(k, handles, opts.eps_sigma * sigma0);
         let n = points.len() * k;
@@ -244,7 +246,7 @@ where
     /// The M Monte-Carlo samples of step `step`: pool entries and directions from the
     /// per-sample streams `(seed, step, j)`.
     pub fn samples(&self, step: u64) -> Vec<McSample<D>> {
-        (0..self.opts.samples)
+        let samples = (0..self.opts.samples)
             .map(|j| {
                 let mut r = Rng::stream(self.opts.seed, step, j as u64);
                 let pool = r.below(self.pool.len());
@@ -256,7 +258,12 @@ where
                     pool,
                 }
             })
-            .collect()
+            .collect::<Vec<_>>();
+        // Spatially coherent order: consecutive samples (and each gradient chunk) touch
+        // neighbouring parameter rows, which the spatial order of the points keeps close in
+        // memory.
+        let ys: Vec<[f64; D]> = samples.iter().map(|s| s.y).collect();
+        permute(&samples, &spatial_order(&ys), 1)
     }
 
     /// Energy and gradient at parameters `f` (N by K row-major) with the samples of `step`.
@@ -351,11 +358,12 @@ where
         }
         let mut x = self.points.x.clone();
         x.extend(xs);
-        self.points = PointSet::new(x, &self.domain)?;
+        let order = spatial_order(&x);
+        self.points = PointSet::new(permute(&x, &order, 1), &self.domain)?;
         self.reset_cache();
-        self.f = f;
-        self.adam.m = m;
-        self.adam.v = v;
+        self.f = permute(&f, &order, k);
+        self.adam.m = permute(&m, &order, k);
+        self.adam.v = permute(&v, &order, k);
         self.lr /= self.opts.lr_decay;
         self.cons.set_eps(self.opts.eps_sigma * self.points.sigma)?;
         Ok(())
@@ -430,6 +438,21 @@ where
         ps.visible_within(&self.domain, o, d, r, &[], visibility, &mut cand, &mut st);
         val.eval(ps, z, &cand, &self.f, self.k())
     }
+}
+
+/// Morton order of points (see [`super::coherent_order`]).
+fn spatial_order<const D: usize>(x: &[[f64; D]]) -> Vec<usize> {
+    let a = super::sampling::to_array(x);
+    super::coherent_order::<D>(&a.view())
+}
+
+/// Rows `order[0], order[1], ...` of `v` seen as rows of `width` entries.
+fn permute<T: Copy>(v: &[T], order: &[usize], width: usize) -> Vec<T> {
+    let mut out = Vec::with_capacity(v.len());
+    for &i in order {
+        out.extend_from_slice(&v[i * width..(i + 1) * width]);
+    }
+    out
 }
 
 fn to_unit<const D: usize>(x: &[f64; D], offset: &[f64; D], scale: f64) -> [f64; D] {
