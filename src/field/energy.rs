@@ -25,7 +25,7 @@ use super::sampling::Domain;
 use super::{add, scale, sub, Boundary, BoundaryQueries};
 
 /// Fixed number of gradient buffers (the reduction tree does not depend on the threads).
-pub const CHUNKS: usize = 8;
+pub const CHUNKS: usize = 4;
 
 /// One Monte-Carlo term: centre, direction and eq. 11 weight.
 #[derive(Clone, Copy, Debug)]

@@ -33,6 +33,7 @@ pub struct RayStats {
 }
 
 impl RayStats {
+    /// Adds the counters of `o`.
     pub fn add(&mut self, o: &RayStats) {
         self.pairs += o.pairs;
         self.rays += o.rays;
@@ -106,10 +107,12 @@ where
         })
     }
 
+    /// Number of points N.
     pub fn len(&self) -> usize {
         self.x.len()
     }
 
+    /// True if there is no point (never, after [`PointSet::new`]).
     pub fn is_empty(&self) -> bool {
         self.x.is_empty()
     }
