@@ -30,20 +30,28 @@ impl Adam {
 
     /// One step `x -= lr * m_hat / (sqrt(v_hat) + eps)` from gradient `g` (same length as x).
     pub fn step(&mut self, x: &mut [f64], g: &[f64], lr: f64) {
+        use rayon::prelude::*;
         self.t += 1;
-        let (b1, b2) = (self.beta1, self.beta2);
+        let (b1, b2, eps) = (self.beta1, self.beta2, self.eps);
         let c1 = 1.0 - b1.powi(self.t as i32);
         let c2 = 1.0 - b2.powi(self.t as i32);
-        for i in 0..x.len() {
-            let gi = g[i];
-            self.m[i] = b1 * self.m[i] + (1.0 - b1) * gi;
-            self.v[i] = b2 * self.v[i] + (1.0 - b2) * gi * gi;
-            let mh = self.m[i] / c1;
-            let vh = self.v[i] / c2;
-            x[i] -= lr * mh / (vh.sqrt() + self.eps);
-        }
+        // Elementwise, so the parallel split cannot change the result.
+        x.par_chunks_mut(CHUNK)
+            .zip(self.m.par_chunks_mut(CHUNK))
+            .zip(self.v.par_chunks_mut(CHUNK))
+            .zip(g.par_chunks(CHUNK))
+            .for_each(|(((x, m), v), g)| {
+                for (((xi, mi), vi), &gi) in x.iter_mut().zip(m).zip(v).zip(g) {
+                    *mi = b1 * *mi + (1.0 - b1) * gi;
+                    *vi = b2 * *vi + (1.0 - b2) * gi * gi;
+                    *xi -= lr * (*mi / c1) / ((*vi / c2).sqrt() + eps);
+                }
+            });
     }
 }
+
+/// Parameters per parallel work item of [`Adam::step`].
+const CHUNK: usize = 1 << 14;
 
 #[cfg(test)]
 mod tests {
