@@ -8,7 +8,14 @@
 
 from . import field, io
 from .bbw import bbw_dual, bbw_dual_constrained, biharmonic_energy, boundary_conditions
-from .field import closest_point, knn_distance, segment_visible, winding_number
+from .field import (
+    GeometricField,
+    bbw_field,
+    closest_point,
+    knn_distance,
+    segment_visible,
+    winding_number,
+)
 from .meshing import MeshingWarning, mesh_with_skeleton, skin_weights
 from .operators import biharmonic_matrix, connected_components, cotan_laplacian, massmatrix
 from .reduce import (
@@ -30,9 +37,11 @@ from .skinning import (
 __version__ = "0.1.0"
 
 __all__ = [
+    "GeometricField",
     "MeshingWarning",
     "bbw_dual",
     "bbw_dual_constrained",
+    "bbw_field",
     "biharmonic_energy",
     "biharmonic_matrix",
     "bone_parents",

@@ -10,11 +10,16 @@ for counter-clockwise outer polygons in 2D.
 * :func:`segment_visible`: the visibility indicator of the kernel ``k_RT`` (eq. 4).
 * :func:`closest_point`: closest boundary point, its primitive and normal (eq. 9).
 * :func:`knn_distance`: distance to the k-th nearest neighbour (``sigma`` heuristic).
+* :class:`GeometricField`, :func:`bbw_field`: mesh-free bounded biharmonic weights on the
+  visibility-aware point field (Secs. 4-5, App. A).
 
 Each call builds its acceleration structure in Rust (in parallel, with the GIL released).
 """
 
 from __future__ import annotations
+
+import sys
+import time
 
 import numpy as np
 
@@ -177,3 +182,325 @@ def knn_distance(X, k=9):
     if k >= X.shape[0]:
         raise ValueError(f"k must be smaller than the number of points ({X.shape[0]}), got {k}")
     return _skinrs._knn_distance(X, k)
+
+
+# --- the geometric field (Dodik et al. 2024, Secs. 4-5, App. A) ------------------------------
+
+#: Options of :class:`GeometricField` and their meaning (defaults: paper App. A).
+FIELD_OPTIONS = {
+    "n_points": "initial number of field points (2^11 in 2D, 2^13 in 3D)",
+    "samples": "Monte-Carlo samples per step M (2^12 in 2D, 2^11 in 3D)",
+    "steps": "steps of the full schedule (6000)",
+    "upsamples": "doublings of the point set at regular intervals (3)",
+    "lr": "initial Adam learning rate (0.2), divided by lr_decay (3) at each doubling",
+    "lr_decay": "learning-rate divisor at each doubling (3)",
+    "beta1": "Adam beta1 (0.9)",
+    "beta2": "Adam beta2 (0.8)",
+    "adam_eps": "Adam epsilon (1e-10)",
+    "h": "finite-difference step of eq. 13 in units of sigma (1)",
+    "eps": "radius of the handle / paint / Neumann neighbourhoods in units of sigma (0.5)",
+    "visibility": "visibility-aware kernel k_RT (True); False gives the plain Gaussian k_E",
+    "wn_l": "winding-number rejection threshold (0.1)",
+    "wn_h": "winding-number full-weight threshold (0.25)",
+    "pool": "interior samples drawn once; every step draws its M samples from them "
+    "(2^17 in 2D, 2^16 in 3D)",
+    "cache_visibility": "cache the visible points of each pool sample (True; exact)",
+    "skip_rays": "skip rays covered by boundary-free balls (True; exact, False to measure)",
+    "resume_steps": "steps of optimize() once the schedule is complete, e.g. after paint (1500)",
+}
+
+
+def _boundary_edges_2d(V, T):
+    """Boundary segments of a 2D triangle mesh, oriented so the interior has winding number 1."""
+    a, b, c = (V[T[:, i]] for i in range(3))
+    u, v = b - a, c - a
+    area = u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]
+    T = np.where((area < 0)[:, None], T[:, [0, 2, 1]], T)
+    E = np.concatenate([T[:, [0, 1]], T[:, [1, 2]], T[:, [2, 0]]])
+    key = np.sort(E, axis=1)
+    _, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    return np.ascontiguousarray(E[cnt[inv.ravel()] == 1])
+
+
+def _handles(C, P, BE, d):
+    C = _checks.as_points(C, "C", min_rows=1)
+    if d == 2 and C.shape[1] == 3:
+        if np.any(C[:, 2] != 0):
+            raise ValueError("V is 2D but C has non-zero z coordinates")
+        C = np.ascontiguousarray(C[:, :2])
+    if C.shape[1] != d:
+        raise ValueError(f"C must have {d} columns like V, got {C.shape}")
+    h = C.shape[0]
+    P = _checks.as_index_array([] if P is None else P, h, "P", ndim=1)
+    BE = _checks.as_index_array(np.zeros((0, 2)) if BE is None else BE, h, "BE", cols=2)
+    if len(P) + len(BE) == 0:
+        raise ValueError("no handles: give point handles P and/or bone edges BE")
+    if len(np.unique(P)) != len(P):
+        raise ValueError("P holds a point handle more than once")
+    if len(BE) and np.any(np.all(C[BE[:, 0]] == C[BE[:, 1]], axis=1)):
+        raise ValueError("BE has a zero-length bone")
+    return C, P, BE
+
+
+class GeometricField:
+    """Mesh-free bounded biharmonic weights on a geometric field (Dodik et al. 2024).
+
+    The weights are a kernel field over points sampled inside the shape (eq. 2) whose kernel
+    ignores points hidden behind the boundary (eq. 4), made non-negative and partition-of-unity
+    by a normalised softplus (Sec. 4.2), exactly one-hot on the handles by a mollifier (eqs. 7,
+    15, 16) and optionally zero-Neumann on the boundary (eq. 9). Its parameters minimise a
+    Monte-Carlo biharmonic energy (eqs. 10-13) with Adam on a multiscale schedule (App. A). No
+    volume mesh is needed: the boundary may be open, self-intersecting or a triangle soup
+    (inside/outside by the generalized winding number, eq. 11).
+
+    Parameters
+    ----------
+    V : (n, 3) or (n, 2) float array
+        Vertices (any units; the shape is rescaled into the unit box internally).
+    F : (m, 3) int array, (m, 2) int array, or None
+        3D: boundary triangles (a mesh, an open mesh or a soup). 2D: boundary segments, or a
+        triangle mesh whose boundary is used (and whose triangles are sampled). ``None``: ``V``
+        is a point cloud; the domain is the union of balls of the cloud's median 9-NN spacing
+        around its points, with no visibility.
+    C : (h, d) float array
+        Joint / handle positions (a 3-column ``C`` with z = 0 is accepted in 2D).
+    BE : (b, 2) int array, optional
+        Bone edges into ``C``.
+    P : (p,) int array, optional
+        Point handles (indices into ``C``). Columns: point handles first, then bones (libigl).
+    tets : (t, 4) int array, optional
+        A tet mesh of the interior over ``V`` (3D), used only to sample interior points.
+    neumann : bool
+        Zero-Neumann boundary conditions (eq. 9) instead of natural ones.
+    seed : int
+        Seed of every random draw; results are bitwise reproducible for a seed.
+    verbose : bool
+        Print progress of :meth:`optimize` to stderr about every second.
+    **options
+        See :data:`FIELD_OPTIONS` (``n_points``, ``samples``, ``steps``, ``upsamples``, ``lr``,
+        ``h``, ``eps``, ``visibility``, ``pool``, ``resume_steps``, ...).
+
+    Examples
+    --------
+    >>> import numpy as np, skinrs
+    >>> V = np.array([[0, 0], [2, 0], [2, 1], [0, 1]], dtype=float)
+    >>> E = np.array([[0, 1], [1, 2], [2, 3], [3, 0]])
+    >>> C = np.array([[0.3, 0.5], [1.7, 0.5]])
+    >>> fld = skinrs.GeometricField(V, E, C, P=[0, 1], steps=40, n_points=256, samples=256,
+    ...                             upsamples=1, pool=4096)
+    >>> fld.optimize()
+    >>> W = fld.evaluate([[0.3, 0.5], [1.0, 0.5], [1.7, 0.5]])
+    >>> W.round(2)[[0, 2]].tolist(), bool(np.allclose(W.sum(1), 1))
+    ([[1.0, 0.0], [0.0, 1.0]], True)
+    """
+
+    def __init__(
+        self,
+        V,
+        F,
+        C,
+        BE=None,
+        P=None,
+        *,
+        tets=None,
+        neumann=False,
+        seed=0,
+        verbose=False,
+        **options,
+    ):
+        V = _checks.as_points(V, "V")
+        d = V.shape[1]
+        n = V.shape[0]
+        self._V = V
+        self._adj = np.zeros((0, 2), dtype=np.int64)
+        simplices = None
+        if F is None:
+            if n <= 9:
+                raise ValueError(f"a point cloud needs more than 9 points, got {n}")
+            Fb = None
+            self._normal_elems = np.zeros((0, d), dtype=np.int64)
+        else:
+            F = _checks.as_index_array(F, n, "F", cols=(2, 3), allow_empty=False)
+            if d == 3 and F.shape[1] != 3:
+                raise ValueError(f"in 3D, F must hold triangles (m, 3), got {F.shape}")
+            if d == 2 and F.shape[1] == 3:
+                simplices = F
+                Fb = _boundary_edges_2d(V, F)
+                if len(Fb) == 0:
+                    raise ValueError("the 2D triangle mesh F has no boundary edges")
+            else:
+                Fb = F
+            self._adj = F
+            self._normal_elems = Fb
+        if tets is not None:
+            if d != 3:
+                raise ValueError("tets are for 3D shapes; in 2D pass the triangles as F")
+            simplices = _checks.as_index_array(tets, n, "tets", cols=4, allow_empty=False)
+        C, P, BE = _handles(C, P, BE, d)
+        unknown = set(options) - set(FIELD_OPTIONS)
+        if unknown:
+            raise ValueError(f"unknown options {sorted(unknown)}; see skinrs.field.FIELD_OPTIONS")
+        self._resume = _checks.positive_int(options.pop("resume_steps", 1500), "resume_steps")
+        for key in ("n_points", "samples", "steps", "pool"):
+            if key in options:
+                options[key] = _checks.positive_int(options[key], key)
+        if "upsamples" in options:
+            u = options["upsamples"]
+            if isinstance(u, bool) or not isinstance(u, (int, np.integer)) or u < 0:
+                raise ValueError(f"upsamples must be a non-negative integer, got {u!r}")
+            options["upsamples"] = int(u)
+        for key in ("lr", "lr_decay", "h", "eps", "adam_eps"):
+            if key in options:
+                options[key] = _checks.positive_float(options[key], key)
+        for key in ("beta1", "beta2", "wn_l", "wn_h"):
+            if key in options:
+                options[key] = float(options[key])
+        for key in ("visibility", "cache_visibility", "skip_rays"):
+            if key in options:
+                options[key] = bool(options[key])
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+            raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+        options.update(neumann=bool(neumann), seed=int(seed))
+        self.k = len(P) + len(BE)
+        self.dim = d
+        self.verbose = bool(verbose)
+        self._f = _skinrs._GeometricField(V, Fb, simplices, C, P, BE, options)
+
+    def optimize(self, steps=None, callback=None):
+        """Run Adam on the Monte-Carlo biharmonic energy.
+
+        Parameters
+        ----------
+        steps : int, optional
+            Number of steps. Default: to the end of the schedule (``steps`` option, with the
+            point set doubled ``upsamples`` times on the way); once the schedule is complete
+            (e.g. after :meth:`paint`), ``resume_steps`` more steps at the final resolution.
+        callback : callable, optional
+            ``callback(stage, step, energy)`` about every 0.1 s (stage ``"optimize"``);
+            returning ``False`` stops (raises ``KeyboardInterrupt``); Ctrl-C also stops, and
+            the field keeps the steps done so far.
+        """
+        if steps is not None:
+            steps = _checks.positive_int(steps, "steps")
+        if callback is not None and not callable(callback):
+            raise ValueError("callback must be callable")
+        cb = _verbose_callback(self.verbose, callback)
+        self._f.optimize(steps, self._resume, cb)
+        if self.verbose:
+            i = self.info()
+            print(
+                f"skinrs.GeometricField: step {i['step']}, {i['n_points']} points, energy "
+                f"{i['energy']:.4g}, {i['time_optimize']:.1f} s",
+                file=sys.stderr,
+            )
+
+    def paint(self, points, weights):
+        """Add painted Dirichlet conditions (Sec. 4.3, Fig. 6); then :meth:`optimize` resumes.
+
+        Parameters
+        ----------
+        points : (q, d) float array
+            Painted positions (usually boundary points or vertices), in the input's units.
+        weights : (q, K) float array or (K,) array
+            Prescribed weights there: rows >= 0 summing to 1. A single row applies to every
+            point. Points painted again get the new value.
+        """
+        Q = _checks.as_points(points, "points", dims=(self.dim,))
+        W = np.asarray(weights, dtype=np.float64)
+        if W.ndim == 1:
+            W = np.tile(W, (Q.shape[0], 1))
+        W = _checks.as_weights(W, Q.shape[0], "weights")
+        if W.shape[1] != self.k:
+            raise ValueError(f"weights must have {self.k} columns (one per handle), got {W.shape}")
+        if W.min() < 0 or np.any(np.abs(W.sum(1) - 1) > 1e-9):
+            raise ValueError("painted weights must be >= 0 with rows summing to 1")
+        self._f.paint(Q, np.ascontiguousarray(W))
+
+    def evaluate(self, Q, return_status=False):
+        """Weights at arbitrary points (eq. 7).
+
+        Parameters
+        ----------
+        Q : (q, d) float array in the input's units
+        return_status : bool
+            Also return per row 0 (visible points found), 1 (none visible: plain Gaussian
+            kernel), 2 (no point within the kernel: nearest point's value).
+
+        Returns
+        -------
+        W : (q, K) float array, rows >= 0 summing to 1, one-hot on handles
+        """
+        Q = _checks.as_points(Q, "Q", dims=(self.dim,), min_rows=0)
+        W, s = self._f.evaluate(Q)
+        return (W, s) if return_status else W
+
+    def vertex_weights(self, return_status=False):
+        """Weights at the input vertices ``V`` (App. A, "Evaluation on the boundary").
+
+        Rays start 1e-5 (unit-box units) inside along the vertex normal; vertices outside the
+        shape or occluded from every point take the average of their neighbours (flood fill);
+        the rest falls back to the kernel without visibility. ``return_status`` also returns
+        per vertex 0 (direct), 3 (flood-filled), 1 (no visibility), 2 (nearest point).
+
+        Returns
+        -------
+        W : (n, K) float array
+        """
+        W, s = self._f.vertex_weights(self._V, self._normal_elems, self._adj)
+        return (W, s) if return_status else W
+
+    def info(self):
+        """Diagnostics: points, sigma, step, learning rate, energy, rays, timings (dict)."""
+        return self._f.info()
+
+    @property
+    def points(self):
+        """The field's points ``x_i`` (N, d), in the input's units."""
+        return self._f.points()
+
+    @property
+    def params(self):
+        """The parameters ``f_i`` (N, K)."""
+        return self._f.params()
+
+    def energy(self, f, step=0):
+        """Monte-Carlo energy (eq. 11) and its hand-derived gradient at parameters ``f`` (N, K),
+        with the samples of optimisation step ``step`` (for checks)."""
+        f = _checks.as_points(f, "f", dims=(self.k,))
+        return self._f.energy(f, int(step))
+
+
+def bbw_field(V, F, C, BE=None, P=None, **options):
+    """Bounded biharmonic weights at the vertices of ``V`` without a volume mesh.
+
+    One-shot :class:`GeometricField` (same arguments and options): optimise with the full
+    schedule, return :meth:`GeometricField.vertex_weights`.
+
+    Examples
+    --------
+    >>> import numpy as np, skinrs
+    >>> V = np.array([[0, 0], [2, 0], [2, 1], [0, 1]], dtype=float)
+    >>> E = np.array([[0, 1], [1, 2], [2, 3], [3, 0]])
+    >>> W = skinrs.bbw_field(V, E, [[0.3, 0.5], [1.7, 0.5]], P=[0, 1], steps=40,
+    ...                      n_points=256, samples=256, upsamples=1, pool=4096)
+    >>> W.shape, bool(np.allclose(W.sum(1), 1))
+    ((4, 2), True)
+    """
+    fld = GeometricField(V, F, C, BE=BE, P=P, **options)
+    fld.optimize()
+    return fld.vertex_weights()
+
+
+def _verbose_callback(verbose, callback):
+    if not verbose:
+        return callback
+    last = [0.0]
+
+    def cb(stage, iteration, value):
+        now = time.perf_counter()
+        if now - last[0] > 1.0:
+            last[0] = now
+            print(f"  {stage} step {iteration}: energy {value:.4g}", file=sys.stderr)
+        return None if callback is None else callback(stage, iteration, value)
+
+    return cb

@@ -17,12 +17,21 @@
 //! outside, counter-clockwise outer polygons in 2D) give winding number 1 inside.
 //! All batch queries run in parallel with rayon and return results in query order.
 
+pub mod adam;
 pub mod bvh;
+pub mod energy;
+pub mod evaluate;
 pub mod grid;
+pub mod kernel;
+pub mod mollifier;
+pub mod optimize;
+pub mod rng;
+pub mod sampling;
 pub mod winding;
 
 pub use bvh::{Aabb, Boundary, BoundaryQueries, Bvh, Closest};
 pub use grid::{knn_distance, HashGrid};
+pub use optimize::{FieldOptions, GeometricField};
 pub use winding::{winding_number_2d, FastWinding};
 
 pub(crate) type P3 = [f64; 3];
