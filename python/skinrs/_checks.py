@@ -7,6 +7,9 @@ dropped or reinterpreted.
 
 from __future__ import annotations
 
+import sys
+import time
+
 import numpy as np
 
 
@@ -101,3 +104,21 @@ def positive_float(x, name: str) -> float:
     if not np.isfinite(f) or f <= 0:
         raise ValueError(f"{name} must be a positive finite number, got {x!r}")
     return f
+
+
+def progress_printer(verbose, callback, describe, every=1.0):
+    """The ``callback(stage, iteration, value)`` a long Rust job reports to: with ``verbose``,
+    print ``describe(stage, iteration, value)`` to stderr at most every ``every`` seconds, then
+    forward to the user's ``callback`` (whose ``False`` stops the job)."""
+    if not verbose:
+        return callback
+    last = [0.0]
+
+    def cb(stage, iteration, value):
+        now = time.perf_counter()
+        if now - last[0] > every:
+            last[0] = now
+            print(f"  {describe(stage, iteration, value)}", file=sys.stderr)
+        return None if callback is None else callback(stage, iteration, value)
+
+    return cb

@@ -209,7 +209,7 @@ def bbw_dual_constrained(
     B = biharmonic_matrix(V, T, mass=mass).tocsc()
     B.sort_indices()
     t_ops = time.perf_counter() - t0
-    cb = _progress_callback(verbose, callback)
+    cb = _checks.progress_printer(verbose, callback, _describe)
     W, info = _skinrs._bbw_dual(
         B.data,
         B.indices.astype(np.int64),
@@ -272,17 +272,6 @@ def bbw_dual(V, T, C, BE=None, P=None, *, bc_tol=DEFAULT_BC_TOL, **options):
     return bbw_dual_constrained(V, T, b, bc, **options)
 
 
-def _progress_callback(verbose, callback):
-    if not verbose:
-        return callback
-    last = [0.0]
-
-    def cb(stage, iteration, value):
-        now = time.perf_counter()
-        if now - last[0] > 1.0:
-            last[0] = now
-            what = "partition-of-unity residual" if stage.endswith("cg") else "relative gap"
-            print(f"  {stage} iteration {iteration}: {what} {value:.2e}", file=sys.stderr)
-        return None if callback is None else callback(stage, iteration, value)
-
-    return cb
+def _describe(stage, iteration, value):
+    what = "partition-of-unity residual" if stage.endswith("cg") else "relative gap"
+    return f"{stage} iteration {iteration}: {what} {value:.2e}"

@@ -19,7 +19,6 @@ Each call builds its acceleration structure in Rust (in parallel, with the GIL r
 from __future__ import annotations
 
 import sys
-import time
 
 import numpy as np
 
@@ -384,7 +383,7 @@ class GeometricField:
             steps = _checks.positive_int(steps, "steps")
         if callback is not None and not callable(callback):
             raise ValueError("callback must be callable")
-        cb = _verbose_callback(self.verbose, callback)
+        cb = _checks.progress_printer(self.verbose, callback, _describe)
         self._f.optimize(steps, self._resume, cb)
         if self.verbose:
             i = self.info()
@@ -491,16 +490,5 @@ def bbw_field(V, F, C, BE=None, P=None, **options):
     return fld.vertex_weights()
 
 
-def _verbose_callback(verbose, callback):
-    if not verbose:
-        return callback
-    last = [0.0]
-
-    def cb(stage, iteration, value):
-        now = time.perf_counter()
-        if now - last[0] > 1.0:
-            last[0] = now
-            print(f"  {stage} step {iteration}: energy {value:.4g}", file=sys.stderr)
-        return None if callback is None else callback(stage, iteration, value)
-
-    return cb
+def _describe(stage, iteration, value):
+    return f"{stage} step {iteration}: energy {value:.4g}"
