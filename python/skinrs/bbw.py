@@ -151,7 +151,8 @@ def bbw_dual_constrained(
         returning ``False`` stops the solve (raises ``KeyboardInterrupt``). Ctrl-C also stops it.
     return_info : bool
         Also return a dict of diagnostics: solver, iterations and evaluations (L-BFGS),
-        rounds and cg_iterations (active set), energy, lower_bound, gap, relative_gap,
+        rounds, cg_iterations and fallbacks (active set: rounds, CG iterations in them, and
+        hand-overs to L-BFGS when the rounds stall), energy, lower_bound, gap, relative_gap,
         dual_objective, min_raw_weight, max_raw_weight, converged, and seconds per phase:
         time_operators, time_factor, time_solve and within it time_lbfgs, time_active_set
         (of which time_support_factor and time_cg).

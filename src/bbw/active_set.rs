@@ -26,8 +26,10 @@
 //! the solve stops once their relative gap is below `tol`. Without partition of unity
 //! (App. A) the columns decouple and each one is a box-constrained QP solved the same way with
 //! two bounds and no `mu`. Primal-dual active sets are not guaranteed to converge when `A` is not
-//! an M-matrix (the biharmonic one is not); if the gap stalls the solve falls back to L-BFGS,
-//! warm-started from the last multipliers.
+//! an M-matrix (the biharmonic one is not), and on fine meshes their own lower bound lags: if the
+//! gap stalls, L-BFGS warm-started from the last multipliers runs for at most `INTERMISSION`
+//! iterations, then the rounds resume until their upper bound stops falling, and L-BFGS
+//! finishes.
 
 use std::time::Instant;
 
@@ -123,6 +125,19 @@ pub(crate) fn solve(
     info: &mut BbwInfo,
     progress: &mut dyn Progress,
 ) -> SkinResult<()> {
+    solve_with_stall(prob, opts, STALL_ROUNDS, best, info, progress)
+}
+
+/// [`solve`] with the stall window of the first rounds as a parameter (tests force the
+/// L-BFGS hand-over with a window of 0).
+fn solve_with_stall(
+    prob: &EliminatedProblem,
+    opts: &BbwOptions,
+    stall_rounds: usize,
+    best: &mut Best,
+    info: &mut BbwInfo,
+    progress: &mut dyn Progress,
+) -> SkinResult<()> {
     let (nf, m) = (prob.nf(), prob.m);
     let t = Instant::now();
     let start = random_start(nf, m, blocks(opts), opts.seed);
@@ -135,21 +150,64 @@ pub(crate) fn solve(
     let t = Instant::now();
     // The warm start's projected weights name the first support.
     let w = best.w.clone();
-    let outcome = if opts.partition_of_unity {
-        pou_rounds(prob, opts, &w, best, info, progress)?
-    } else {
-        box_rounds(prob, opts, &w, best, info, progress)?
-    };
+    if !opts.partition_of_unity {
+        let outcome = box_rounds(prob, opts, &w, best, info, progress)?;
+        info.time_active_set = t.elapsed().as_secs_f64();
+        if let Outcome::Stalled(y) = outcome {
+            fallback_lbfgs(prob, opts, opts.max_iter, &y, best, info, progress)?;
+        }
+        return Ok(());
+    }
+    let mut state = PouState::from_warm_start(&w, nf, m);
+    let watch = Watch::Gap(stall_rounds);
+    let mut outcome = pou_rounds(prob, opts, &mut state, watch, best, info, progress)?;
     info.time_active_set = t.elapsed().as_secs_f64();
     if let Outcome::Stalled(y) = outcome {
-        // Adding a constant to every entry leaves W(Y) unchanged (P_m removes row means) and
-        // moves every entry off 0, where the squared parameterisation has no gradient.
-        let delta = 1e-9 * y.iter().copied().fold(0.0, f64::max) + 1e-300;
-        let u: Vec<f64> = y.iter().map(|v| (v + delta).sqrt()).collect();
+        // The rounds' own lower bound lags far behind their upper bound on fine meshes (big2d
+        // after 12 rounds: gap 7e-4, upper already within 1e-6). A short L-BFGS intermission
+        // from their multipliers lifts it; if that does not close the gap the rounds resume
+        // (their upper bound still falls, and their lower bound converges too: big2d reaches
+        // 1e-9 in ~50 rounds, where L-BFGS alone crawls for minutes).
+        fallback_lbfgs(prob, opts, INTERMISSION, &y, best, info, progress)?;
+        if best.relative_gap() <= opts.tol {
+            return Ok(());
+        }
         let t = Instant::now();
-        run_lbfgs(prob, opts, opts.tol, u, best, info, progress)?;
-        info.time_lbfgs += t.elapsed().as_secs_f64();
+        outcome = pou_rounds(prob, opts, &mut state, Watch::Upper, best, info, progress)?;
+        info.time_active_set += t.elapsed().as_secs_f64();
+        if let Outcome::Stalled(y) = outcome {
+            fallback_lbfgs(prob, opts, opts.max_iter, &y, best, info, progress)?;
+        }
     }
+    Ok(())
+}
+
+/// L-BFGS iterations of the first fallback before the rounds resume (big2d: 35-80 lift the
+/// lower bound from a gap of 7e-4 to 1e-6).
+const INTERMISSION: usize = 150;
+
+/// L-BFGS on the dual (at most `max_iter` iterations) warm-started from multipliers `y`.
+fn fallback_lbfgs(
+    prob: &EliminatedProblem,
+    opts: &BbwOptions,
+    max_iter: usize,
+    y: &[f64],
+    best: &mut Best,
+    info: &mut BbwInfo,
+    progress: &mut dyn Progress,
+) -> SkinResult<()> {
+    // Adding a constant to every entry leaves W(Y) unchanged (P_m removes row means) and
+    // moves every entry off 0, where the squared parameterisation has no gradient.
+    let delta = 1e-9 * y.iter().copied().fold(0.0, f64::max) + 1e-300;
+    let u: Vec<f64> = y.iter().map(|v| (v + delta).sqrt()).collect();
+    info.fallbacks += 1;
+    let capped = BbwOptions {
+        max_iter: max_iter.min(opts.max_iter),
+        ..opts.clone()
+    };
+    let t = Instant::now();
+    run_lbfgs(prob, &capped, opts.tol, u, best, info, progress)?;
+    info.time_lbfgs += t.elapsed().as_secs_f64();
     Ok(())
 }
 
@@ -167,50 +225,86 @@ struct StallWatch {
 }
 
 impl StallWatch {
-    fn stalled(&mut self, gap: f64) -> bool {
+    fn stalled(&mut self, gap: f64, window: usize) -> bool {
         if gap < 0.5 * self.best_gap {
             self.best_gap = gap;
             self.since = 0;
         } else {
             self.since += 1;
         }
-        self.since >= STALL_ROUNDS
+        self.since >= window
     }
 }
 
-/// Rounds of the partition-of-unity active-set method from the support of `w` (`nf x m`).
+/// When the partition-of-unity rounds hand over to L-BFGS.
+#[derive(Clone, Copy)]
+enum Watch {
+    /// The certified gap has not halved in this many rounds.
+    Gap(usize),
+    /// Neither of the rounds' own bounds moved by `tol / 2` (relative) in each of two rounds.
+    /// Their lower bound keeps rising after the weights have settled (big2d: by 1e-6..1e-5 per
+    /// round up to round 50), and more rounds beat L-BFGS's crawl there.
+    Upper,
+}
+
+/// The rounds' state, kept across an L-BFGS intermission: the support guess
+/// (`support[j * nf + i]`), the partition-of-unity multiplier and the CG tolerance.
+struct PouState {
+    support: Vec<bool>,
+    mu: Vec<f64>,
+    pou_tol: f64,
+}
+
+impl PouState {
+    fn from_warm_start(w: &[f64], nf: usize, m: usize) -> Self {
+        // The warm start is only accurate to its gap: weights below WARM_GAP are mostly the
+        // smooth tails of W(Y) (eq. 15) over regions that are zero at the optimum. Leaving them
+        // out of the first support saves rounds (hand-403: 9 instead of 18).
+        let mut support: Vec<bool> = w.iter().map(|&x| x > WARM_GAP).collect();
+        for i in 0..nf {
+            // Every row needs a support entry; its largest weight is the safest.
+            let jmax = (0..m)
+                .max_by(|&a, &b| w[a * nf + i].total_cmp(&w[b * nf + i]))
+                .unwrap_or(0);
+            support[jmax * nf + i] = true;
+        }
+        // Partition-of-unity residual accepted from CG: loose while the support is still wrong.
+        PouState {
+            support,
+            mu: vec![0.0; nf],
+            pou_tol: 1e-4,
+        }
+    }
+}
+
+/// Rounds of the partition-of-unity active-set method from `state`, until the gap is below
+/// `tol`, the KKT signs hold, or `watch` says the rounds have stopped paying.
 fn pou_rounds(
     prob: &EliminatedProblem,
     opts: &BbwOptions,
-    w: &[f64],
+    state: &mut PouState,
+    watch: Watch,
     best: &mut Best,
     info: &mut BbwInfo,
     progress: &mut dyn Progress,
 ) -> SkinResult<Outcome> {
     let (nf, m) = (prob.nf(), prob.m);
-    // The warm start is only accurate to its gap: weights below WARM_GAP are mostly the
-    // smooth tails of W(Y) (eq. 15) over regions that are zero at the optimum. Leaving them out
-    // of the first support saves rounds (hand-403: 9 instead of 18; the 41k-vertex 2D case no
-    // longer stalls into the L-BFGS fallback).
-    let mut support: Vec<bool> = w.iter().map(|&x| x > WARM_GAP).collect();
-    for i in 0..nf {
-        // Every row needs a support entry; its largest weight is the safest.
-        let jmax = (0..m)
-            .max_by(|&a, &b| w[a * nf + i].total_cmp(&w[b * nf + i]))
-            .unwrap_or(0);
-        support[jmax * nf + i] = true;
-    }
-    let mut mu = vec![0.0; nf];
-    let mut watch = StallWatch {
+    let mut gap_watch = StallWatch {
         best_gap: best.relative_gap(),
         since: 0,
     };
-    // Partition-of-unity residual accepted from CG: loose while the support is still wrong.
-    let mut pou_tol = 1e-4;
-    for round in 0..opts.max_iter.min(MAX_ROUNDS) {
+    let (mut last_upper, mut last_lower, mut quiet) = (f64::INFINITY, f64::NEG_INFINITY, 0usize);
+    let budget = opts.max_iter.min(MAX_ROUNDS).saturating_sub(info.rounds);
+    for _ in 0..budget {
+        let round = info.rounds;
         info.rounds += 1;
+        let PouState {
+            support,
+            mu,
+            pou_tol,
+        } = &mut *state;
         let t = Instant::now();
-        let factors = factor_supports(&prob.a, &support, nf)?;
+        let factors = factor_supports(&prob.a, support, nf)?;
         info.time_support_factor += t.elapsed().as_secs_f64();
         let weights = |mu: &[f64]| -> Vec<f64> {
             let cols: Vec<Vec<f64>> = factors
@@ -241,14 +335,14 @@ fn pou_rounds(
             out
         };
         // S delta = rowsum(W(mu)) - 1, warm-started at the previous round's mu.
-        let w_mu = weights(&mu);
+        let w_mu = weights(mu);
         let residual = row_sums_minus_one(&w_mu, nf, m);
         let t = Instant::now();
-        let (delta, iters) = pcg(prob, apply_s, &residual, pou_tol, progress)?;
+        let (delta, iters) = pcg(prob, apply_s, &residual, *pou_tol, progress)?;
         info.time_cg += t.elapsed().as_secs_f64();
         info.cg_iterations += iters;
         mu.iter_mut().zip(&delta).for_each(|(u, d)| *u += d);
-        let w = weights(&mu);
+        let w = weights(mu);
 
         // Multipliers y = A w + g + mu on the zero set (eq. 15 read backwards).
         let aw = prob.apply_a(&w);
@@ -281,7 +375,9 @@ fn pou_rounds(
         // smooth but nowhere exactly zero, and once projected can win on energy by a hair
         // while sitting 1e-4 off the optimum in flat directions.
         let y_plus: Vec<f64> = y.iter().map(|v| v.max(0.0)).collect();
-        best.bound(&pou_eval(prob, &y_plus));
+        let own = pou_eval(prob, &y_plus);
+        let own_lower = own.lower_bound;
+        best.bound(&own);
         progress.report(Event {
             stage: "active-set",
             iteration: round,
@@ -291,17 +387,26 @@ fn pou_rounds(
             return Ok(Outcome::Done);
         }
         let exact = n_w == 0 && n_y == 0;
-        if exact && pou_tol <= POU_FLOOR * opts.tol {
+        if exact && *pou_tol <= POU_FLOOR * opts.tol {
             // Every KKT sign holds and PoU to round-off: this is the optimum; the gap is as
             // small as floating point allows.
             return Ok(Outcome::Done);
         }
-        if watch.stalled(best.relative_gap()) {
+        // The rounds' own bounds (best may hold an L-BFGS point from the intermission).
+        let size = upper.abs().max(1e-300);
+        let moved = (last_upper - upper).max(own_lower - last_lower) / size;
+        (last_upper, last_lower) = (upper, own_lower);
+        quiet = if moved < 0.5 * opts.tol { quiet + 1 } else { 0 };
+        let stalled = match watch {
+            Watch::Gap(window) => gap_watch.stalled(best.relative_gap(), window),
+            Watch::Upper => quiet >= 2,
+        };
+        if stalled {
             return Ok(Outcome::Stalled(y_plus));
         }
         // Rows are renormalised at the end, so a PoU residual far below tol changes nothing.
-        pou_tol = (pou_tol * 0.1).max(1e-13).max(POU_FLOOR * opts.tol);
-        support = next;
+        *pou_tol = (*pou_tol * 0.1).max(1e-13).max(POU_FLOOR * opts.tol);
+        *support = next;
     }
     Ok(Outcome::Done)
 }
@@ -466,7 +571,7 @@ fn box_rounds(
         if changes == 0 {
             return Ok(Outcome::Done);
         }
-        if watch.stalled(best.relative_gap()) {
+        if watch.stalled(best.relative_gap(), STALL_ROUNDS) {
             if best.relative_gap() <= opts.tol {
                 return Ok(Outcome::Done); // certified; the last swaps only cycle at round-off
             }
@@ -475,4 +580,72 @@ fn box_rounds(
         }
     }
     Ok(Outcome::Done)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bbw::solve::Solver;
+    use crate::operators::{biharmonic_matrix, MassKind};
+    use crate::progress::Silent;
+    use ndarray::Array2;
+
+    /// A `k x k` grid of the unit square with handles at three corners and the centre.
+    fn grid_problem(k: usize) -> EliminatedProblem {
+        let h = 1.0 / (k - 1) as f64;
+        let v = Array2::from_shape_fn((k * k, 2), |(i, c)| {
+            h * if c == 0 { i % k } else { i / k } as f64
+        });
+        let mut f = Vec::new();
+        for r in 0..k - 1 {
+            for c in 0..k - 1 {
+                let i = r * k + c;
+                f.extend([i, i + 1, i + k + 1, i, i + k + 1, i + k]);
+            }
+        }
+        let f = Array2::from_shape_vec((f.len() / 3, 3), f).unwrap();
+        let bmat = biharmonic_matrix(v.view(), f.view(), MassKind::Voronoi).unwrap();
+        let b = vec![0, k - 1, (k / 2) * k + k / 2, k * k - 1];
+        let bc = Array2::from_shape_fn((4, 4), |(i, j)| f64::from(i == j));
+        EliminatedProblem::new(&bmat, &b, bc.view()).unwrap()
+    }
+
+    fn run(prob: &EliminatedProblem, stall_rounds: usize) -> (Best, BbwInfo) {
+        let opts = BbwOptions {
+            solver: Solver::ActiveSet,
+            tol: 1e-11,
+            ..Default::default()
+        };
+        let (mut best, mut info) = (Best::new(), BbwInfo::default());
+        solve_with_stall(prob, &opts, stall_rounds, &mut best, &mut info, &mut Silent).unwrap();
+        (best, info)
+    }
+
+    #[test]
+    fn rounds_resume_after_the_lbfgs_intermission() {
+        let prob = grid_problem(25);
+        let (plain, plain_info) = run(&prob, STALL_ROUNDS);
+        assert_eq!(
+            plain_info.fallbacks, 0,
+            "the plain rounds should not stall here"
+        );
+        assert!(plain.relative_gap() <= 1e-11);
+        // A window of 0 hands over to L-BFGS after the first round; 150 L-BFGS iterations do
+        // not reach 1e-11, so the rounds must resume and finish the job.
+        let (forced, info) = run(&prob, 0);
+        assert!(info.fallbacks >= 1, "no hand-over: {info:?}");
+        assert!(info.rounds > 1, "the rounds did not resume: {info:?}");
+        assert!(
+            forced.relative_gap() <= 1e-11,
+            "gap {} {info:?} plain {plain_info:?}",
+            forced.relative_gap()
+        );
+        let dw = plain
+            .w
+            .iter()
+            .zip(&forced.w)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        assert!(dw < 1e-6, "max |dW| {dw}");
+    }
 }

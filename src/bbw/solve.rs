@@ -82,6 +82,9 @@ pub struct BbwInfo {
     /// they took in total; zero for `lbfgs-squared`.
     pub rounds: usize,
     pub cg_iterations: usize,
+    /// Hand-overs from the active-set rounds to L-BFGS on the dual (0 when the rounds alone
+    /// closed the gap).
+    pub fallbacks: usize,
     /// `1/2 tr(W^T B W)` of the returned (feasible) weights.
     pub energy: f64,
     /// Best lower bound on the optimal energy found (Lagrangian of the dual).

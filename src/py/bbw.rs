@@ -143,6 +143,7 @@ fn py_bbw_dual<'py>(
     d.set_item("time_lbfgs", info.time_lbfgs)?;
     d.set_item("time_active_set", info.time_active_set)?;
     d.set_item("time_support_factor", info.time_support_factor)?;
+    d.set_item("fallbacks", info.fallbacks)?;
     d.set_item("time_cg", info.time_cg)?;
     Ok((w.into_pyarray(py), d))
 }
