@@ -28,8 +28,8 @@
 //! two bounds and no `mu`. Primal-dual active sets are not guaranteed to converge when `A` is not
 //! an M-matrix (the biharmonic one is not), and on fine meshes their own lower bound lags: if the
 //! gap stalls, L-BFGS warm-started from the last multipliers runs for at most `INTERMISSION`
-//! iterations, then the rounds resume until their upper bound stops falling, and L-BFGS
-//! finishes.
+//! iterations, then the rounds resume until neither of their own bounds moves any more, and
+//! L-BFGS finishes.
 
 use std::time::Instant;
 
@@ -166,14 +166,14 @@ fn solve_with_stall(
         // The rounds' own lower bound lags far behind their upper bound on fine meshes (big2d
         // after 12 rounds: gap 7e-4, upper already within 1e-6). A short L-BFGS intermission
         // from their multipliers lifts it; if that does not close the gap the rounds resume
-        // (their upper bound still falls, and their lower bound converges too: big2d reaches
-        // 1e-9 in ~50 rounds, where L-BFGS alone crawls for minutes).
+        // (their upper bound still falls, and their own lower bound converges too: big2d
+        // reaches 1e-9 in ~50 rounds, where L-BFGS alone crawls for minutes).
         fallback_lbfgs(prob, opts, INTERMISSION, &y, best, info, progress)?;
         if best.relative_gap() <= opts.tol {
             return Ok(());
         }
         let t = Instant::now();
-        outcome = pou_rounds(prob, opts, &mut state, Watch::Upper, best, info, progress)?;
+        outcome = pou_rounds(prob, opts, &mut state, Watch::Bounds, best, info, progress)?;
         info.time_active_set += t.elapsed().as_secs_f64();
         if let Outcome::Stalled(y) = outcome {
             fallback_lbfgs(prob, opts, opts.max_iter, &y, best, info, progress)?;
@@ -244,7 +244,7 @@ enum Watch {
     /// Neither of the rounds' own bounds moved by `tol / 2` (relative) in each of two rounds.
     /// Their lower bound keeps rising after the weights have settled (big2d: by 1e-6..1e-5 per
     /// round up to round 50), and more rounds beat L-BFGS's crawl there.
-    Upper,
+    Bounds,
 }
 
 /// The rounds' state, kept across an L-BFGS intermission: the support guess
@@ -399,7 +399,7 @@ fn pou_rounds(
         quiet = if moved < 0.5 * opts.tol { quiet + 1 } else { 0 };
         let stalled = match watch {
             Watch::Gap(window) => gap_watch.stalled(best.relative_gap(), window),
-            Watch::Upper => quiet >= 2,
+            Watch::Bounds => quiet >= 2,
         };
         if stalled {
             return Ok(Outcome::Stalled(y_plus));
