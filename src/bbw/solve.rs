@@ -74,7 +74,7 @@ impl Default for BbwOptions {
 #[derive(Debug, Clone, Default)]
 pub struct BbwInfo {
     pub solver: String,
-    /// L-BFGS iterations (for `active-set`: those of the warm start).
+    /// L-BFGS iterations (for `active-set`: those of the warm start and of any fallbacks).
     pub iterations: usize,
     /// Objective/gradient evaluations, i.e. multi-column solves with the Cholesky factor.
     pub evaluations: usize,
