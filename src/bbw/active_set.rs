@@ -248,7 +248,8 @@ impl StallWatch {
 enum Watch {
     /// The certified gap has not halved in this many rounds.
     Gap(usize),
-    /// Neither of the rounds' own bounds moved by `tol / 2` (relative) in each of two rounds.
+    /// Neither of the rounds' own bounds improved on its best by `tol / 2` (relative) in each of
+    /// two rounds ([`OwnBounds`]).
     /// Their lower bound keeps rising after the weights have settled (big2d: by 1e-6..1e-5 per
     /// round up to round 50), and more rounds beat L-BFGS's crawl there.
     Bounds,
