@@ -307,8 +307,9 @@ def test_pytetwild_fallback_snaps_nearest_vertices_onto_bone_samples(
     crossing_tubes, tmp_path, monkeypatch
 ):
     """Last resort, with the real fTetWild: when TetGen fails on the repaired boundary too, the
-    nearest interior fTetWild vertices are moved onto the samples (no tet inverted), and the
-    warning reports the snapping distance."""
+    nearest interior fTetWild vertices are moved onto the samples (no tet inverted), samples
+    left without a movable vertex are inserted, and the warning reports the snapping distance.
+    fTetWild is randomised (even single-threaded), so which samples are inserted varies."""
     import pytetwild  # noqa: F401
 
     monkeypatch.chdir(tmp_path)
@@ -322,7 +323,7 @@ def test_pytetwild_fallback_snaps_nearest_vertices_onto_bone_samples(
 
     def spy(Vw, Tw, S, **kw):  # records the real snapping (inputs and answer), changes nothing
         out = real_snap(Vw, Tw, S, **kw)
-        seen.update(Vw=Vw.copy(), S=S, idx=out[1], dist=out[2])
+        seen.update(Vw=Vw.copy(), Tw=Tw.copy(), S=S, idx=out[2], dist=out[3])
         return out
 
     monkeypatch.setattr(meshing, "_tetgen", refuses)
@@ -331,18 +332,102 @@ def test_pytetwild_fallback_snaps_nearest_vertices_onto_bone_samples(
         W, vol = skinrs.skin_weights(V, F, C, BE, tol=1e-3, return_mesh=True)
     _tubes_checks(V, F, C, BE, W, vol)
     Vw, S, idx, dist = seen["Vw"], seen["S"], seen["idx"], seen["dist"]
-    np.testing.assert_allclose(dist, np.linalg.norm(Vw[idx] - S, axis=1), rtol=0, atol=1e-15)
+    moved = idx < len(Vw)
+    np.testing.assert_allclose(
+        dist[moved], np.linalg.norm(Vw[idx[moved]] - S[moved], axis=1), rtol=0, atol=1e-15
+    )
+    assert np.all(dist[~moved] == 0)
+    assert moved.sum() >= 0.8 * len(S)  # insertion is the exception
     msg = next(str(w.message) for w in rec if "snapping distance" in str(w.message))
     largest = float(msg.split("largest ")[1].split(",")[0])
     assert largest == pytest.approx(dist.max(), rel=1e-2)
+    assert f"moved {moved.sum()} volume vertices" in msg
+    assert ("inserted" in msg) == (not moved.all())
     # each sample took a vertex near it: within one target edge length of fTetWild's mesh
     rho = mean_edge_length(V, F)
     assert dist.max() <= rho
-    # the moved vertices are the only ones that changed, and they sit exactly on the samples
-    moved = np.flatnonzero(np.any(vol["V"] != Vw, axis=1))
-    assert set(moved) <= set(idx.tolist())
-    assert np.array_equal(vol["V"][idx], S)
+    # old vertices that changed were moved onto samples; inserted ones come after them
+    Vv = vol["V"]
+    assert len(Vv) == len(Vw) + (~moved).sum()
+    changed = np.flatnonzero(np.any(Vv[: len(Vw)] != Vw, axis=1))
+    assert set(changed) <= set(idx[moved].tolist())
+    assert np.array_equal(Vv[idx], S)
+    assert meshing._boundary_faces(vol["T"]).shape == meshing._boundary_faces(seen["Tw"]).shape
     assert list(tmp_path.iterdir()) == []
+
+
+def kuhn_cube(n):
+    """The unit cube cut into n^3 cells of 6 positively oriented tets each (deterministic)."""
+    g = np.linspace(0, 1, n + 1)
+    V = np.stack(np.meshgrid(g, g, g, indexing="ij"), -1).reshape(-1, 3)
+    vid = np.arange(len(V)).reshape(n + 1, n + 1, n + 1)
+    T = []
+    for i, j, k in itertools.product(range(n), repeat=3):
+        for perm in itertools.permutations(range(3)):
+            corner, path = np.array([i, j, k]), [vid[i, j, k]]
+            for axis in perm:
+                corner[axis] += 1
+                path.append(vid[tuple(corner)])
+            T.append(path)
+    T = np.array(T)
+    flip = meshing._tet_volumes(V, T) < 0
+    T[flip] = T[flip][:, [0, 1, 3, 2]]
+    return V, T
+
+
+def check_conforming(V, T, V0, T0):
+    """Tets positive, every interior face shared by two tets, boundary and volume unchanged."""
+    vol = meshing._tet_volumes(V, T)
+    assert vol.min() > 1e-3 * vol.mean()
+    faces = np.sort(T[:, [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]]].reshape(-1, 3), axis=1)
+    _, count = np.unique(faces, axis=0, return_counts=True)
+    assert count.max() == 2
+    before = np.sort(np.sort(meshing._boundary_faces(T0), axis=1), axis=0)
+    after = np.sort(np.sort(meshing._boundary_faces(T), axis=1), axis=0)
+    assert np.array_equal(before, after)
+    assert vol.sum() == pytest.approx(meshing._tet_volumes(V0, T0).sum(), rel=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("p", "fan"),
+    [
+        ([0.31, 0.47, 0.52], 4),  # inside a tet: 1 -> 4
+        ([0.25, 0.4, 0.25], 6),  # on a face shared by two tets: 2 -> 6
+        ([0.75, 0.75, 0.75], 12),  # on a cell diagonal, an edge of six tets: 6 -> 12
+        ([0.5005, 0.5, 0.5002], 24),  # next to a vertex: the cavity grows past the slivers
+    ],
+)
+def test_insert_vertex_refans_a_cavity_around_the_point(p, fan):
+    V0, T0 = kuhn_cube(2)
+    vmin = 1e-3 * meshing._tet_volumes(V0, T0).mean()
+    p = np.array(p)
+    V, T, q = meshing._insert_vertex(V0, T0, p, vmin)
+    assert q == len(V0) and np.array_equal(V[q], p) and np.array_equal(V[:q], V0)
+    assert np.any(T == q, axis=1).sum() == fan
+    check_conforming(V, T, V0, T0)
+
+
+def test_insert_vertex_refuses_points_on_the_surface_or_outside():
+    V0, T0 = kuhn_cube(2)
+    vmin = 1e-3 * meshing._tet_volumes(V0, T0).mean()
+    with pytest.raises(ValueError, match=r"on or next to the surface"):
+        meshing._insert_vertex(V0, T0, np.array([0.3, 0.2, 0.0]), vmin)
+    with pytest.raises(ValueError, match=r"outside the fallback mesh"):
+        meshing._insert_vertex(V0, T0, np.array([0.3, 0.2, 1.5]), vmin)
+
+
+def test_snap_inserts_samples_whose_near_vertices_cannot_move():
+    """With one candidate vertex per sample, samples sharing a nearest vertex (or whose nearest
+    vertex is on the surface) must be inserted; every sample ends exactly on a vertex."""
+    V0, T0 = kuhn_cube(4)
+    S = np.c_[np.linspace(0.2, 0.8, 9), np.full(9, 0.45), np.full(9, 0.55)]
+    Vv, T, idx, dist = meshing._snap(V0, T0, S, k=1)
+    assert np.array_equal(Vv[idx], S) and len(np.unique(idx)) == len(S)
+    inserted = idx >= len(V0)
+    assert 0 < inserted.sum() < len(S)
+    assert np.all(dist[inserted] == 0) and np.all(dist[~inserted] > 0)
+    assert len(Vv) == len(V0) + inserted.sum()
+    check_conforming(Vv, T, V0, T0)
 
 
 def test_self_intersecting_surface_without_pytetwild_says_what_to_do(crossing_tubes, monkeypatch):

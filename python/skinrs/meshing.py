@@ -506,12 +506,14 @@ def _fallback(Vw, Tw, S, handles, m, scale, flags, verbose, finer):
         )
         return Vv, T, len(Vs) + np.arange(len(S), dtype=np.int64), bc
     Vw, Tw = finer()
-    Vv, idx, d = _snap(Vw, Tw, S)
+    Vv, Tw, idx, d = _snap(Vw, Tw, S)
+    added = int((idx >= len(Vw)).sum())
     warnings.warn(
-        f"TetGen could not mesh the surface; used fTetWild and moved {len(idx)} volume "
+        f"TetGen could not mesh the surface; used fTetWild and moved {len(idx) - added} volume "
         f"vertices onto the handle samples (snapping distance: largest {d.max():.3g}, mean "
-        f"{d.mean():.3g}; largest = {d.max() / scale:.2%} of the bounding-box diagonal). The "
-        f"input surface vertices are not rows of V_vol.",
+        f"{d.mean():.3g}; largest = {d.max() / scale:.2%} of the bounding-box diagonal)"
+        + (f" and inserted {added} more as new vertices" if added else "")
+        + ". The input surface vertices are not rows of V_vol.",
         MeshingWarning,
         stacklevel=3,
     )
@@ -520,12 +522,17 @@ def _fallback(Vw, Tw, S, handles, m, scale, flags, verbose, finer):
 
 
 def _snap(Vw, Tw, S, k: int = 32):
-    """Moves a distinct interior vertex of ``(Vw, Tw)`` onto each sample, nearest first
-    (greedy by distance). A move that would leave an incident tet inverted or nearly flat
-    (volume below 1e-3 of the mean) is not made; the next nearest free vertex is tried.
-    Boundary vertices stay put, so the surface does not change.
+    """Puts a vertex of ``(Vw, Tw)`` exactly on each sample.
 
-    Returns the moved vertices, the vertex chosen for each sample and the distance moved."""
+    First, greedily by distance, a distinct interior vertex is moved onto each sample, nearest
+    first. A move that would leave an incident tet inverted or nearly flat (volume below 1e-3 of
+    the mean) is not made; the next nearest free vertex is tried. Boundary vertices stay put, so
+    the surface does not change. A sample for which none of its ``k`` nearest vertices can move
+    (its good neighbours went to nearby samples) is inserted as a new vertex instead
+    (:func:`_insert_vertex`); fTetWild is randomised, so this happens on some runs only.
+
+    Returns the vertices, the tets, the vertex of each sample and the distance moved (0 for an
+    inserted vertex)."""
     from scipy.spatial import cKDTree
 
     Vv = np.array(Vw, dtype=np.float64, copy=True)
@@ -542,7 +549,7 @@ def _snap(Vw, Tw, S, k: int = 32):
     d, nn = cKDTree(Vv).query(S, k=k)
     d, nn = d.reshape(len(S), k), nn.reshape(len(S), k)
     taken = boundary.copy()
-    idx, dist = np.empty(len(S), np.int64), np.empty(len(S))
+    idx, dist = np.full(len(S), -1, np.int64), np.zeros(len(S))
     for s in np.argsort(d[:, 0]):
         for c in range(k):
             v = nn[s, c]
@@ -556,14 +563,65 @@ def _snap(Vw, Tw, S, k: int = 32):
                 taken[v] = True
                 break
             Vv[v] = old
-        else:
+    T = Tw
+    for s in np.flatnonzero(idx < 0):
+        Vv, T, idx[s] = _insert_vertex(Vv, T, S[s], vmin)
+    return Vv, T, idx, dist
+
+
+def _insert_vertex(V, T, p, vmin: float, max_tets: int = 64):
+    """Inserts the point ``p`` as a new vertex of the tet mesh ``(V, T)`` (positively oriented).
+
+    The tets of a cavity around ``p`` are replaced by the fan from ``p`` to the cavity's
+    boundary faces, so the mesh stays conforming and its boundary does not change. The cavity
+    starts as the tet containing ``p``; while a fan tet would be flatter than ``vmin`` (``p``
+    lies on or behind that face), the tet across the face joins the cavity.
+
+    Returns the new vertices, the new tets and the index of the new vertex."""
+    faces = T[:, [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]]]  # (m, 4, 3), outward
+    key = np.sort(faces, axis=2).reshape(-1, 3)
+    _, face_id = np.unique(key, axis=0, return_inverse=True)
+    face_id = face_id.reshape(-1, 4)
+    tets_of_face = {}
+    for t, f in zip(np.repeat(np.arange(len(T)), 4), face_id.ravel(), strict=True):
+        tets_of_face.setdefault(int(f), []).append(int(t))
+    cavity = {_containing_tet(V, T, p)}
+    q = len(V)
+    Vn = np.vstack([V, p])
+    while True:
+        fid = face_id[list(cavity)].ravel()
+        tri = faces[list(cavity)].reshape(-1, 3)
+        _, first, cnt = np.unique(fid, return_index=True, return_counts=True)
+        outer = tri[first[cnt == 1]]
+        fan = np.c_[np.full(len(outer), q), outer]
+        bad = _tet_volumes(Vn, fan) <= vmin
+        if not bad.any():
+            break
+        grow = {t for f in fid[first[cnt == 1]][bad] for t in tets_of_face[int(f)]} - cavity
+        if not grow or len(cavity) + len(grow) > max_tets:
             raise ValueError(
-                f"the fallback mesh is too coarse for the skeleton: no free interior vertex "
-                f"among the {k} nearest to sample {S[s].tolist()} can be moved onto it without "
-                "inverting a tet; pass a smaller tetwild_options['edge_length_abs'], lower "
-                "samples_per_edge, or repair the surface so that TetGen can mesh it"
+                f"could not insert the handle sample {p.tolist()} into the fallback mesh "
+                "(it lies on or next to the surface); move the skeleton inside the surface or "
+                "pass a smaller tetwild_options['edge_length_abs']"
             )
-    return Vv, idx, dist
+        cavity |= grow
+    keep = np.ones(len(T), bool)
+    keep[list(cavity)] = False
+    return Vn, np.vstack([T[keep], fan]).astype(T.dtype), q
+
+
+def _containing_tet(V, T, p) -> int:
+    """The tet of ``(V, T)`` whose smallest barycentric coordinate of ``p`` is largest."""
+    X = V[T]
+    A = np.transpose(X[:, 1:] - X[:, :1], (0, 2, 1))  # (m, 3, 3): columns are edges from corner 0
+    ok = np.abs(np.linalg.det(A)) > 0
+    lam = np.full((len(T), 4), -np.inf)
+    lam[ok, 1:] = np.linalg.solve(A[ok], (p - X[ok, 0])[..., None])[..., 0]
+    lam[ok, 0] = 1 - lam[ok, 1:].sum(axis=1)
+    t = int(np.argmax(lam.min(axis=1)))
+    if lam[t].min() < -1e-9:
+        raise ValueError(f"the handle sample {p.tolist()} lies outside the fallback mesh")
+    return t
 
 
 # ---------------------------------------------------------------------------------------------
