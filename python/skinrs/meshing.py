@@ -298,8 +298,8 @@ def mesh_with_skeleton(
     holes) and ``pytetwild`` is installed, fTetWild meshes it instead (target edge length: the
     input's mean edge length), then TetGen meshes fTetWild's repaired boundary with the samples
     inserted exactly; if that fails too, the nearest interior fTetWild vertices are moved onto
-    the samples (a move that would invert a tet is not made; the next nearest vertex is tried).
-    Either way a :class:`MeshingWarning` says so (the snapping one reports the largest move),
+    the samples (a move that would invert a tet is not made; the next nearest vertex is tried),
+    and a sample none of whose nearby vertices can move is inserted as a new vertex. Either way a :class:`MeshingWarning` says so (the snapping one reports the largest move),
     and the surface rows no longer match ``V`` (:func:`skin_weights` then interpolates).
 
     Parameters
