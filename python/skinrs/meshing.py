@@ -299,8 +299,9 @@ def mesh_with_skeleton(
     input's mean edge length), then TetGen meshes fTetWild's repaired boundary with the samples
     inserted exactly; if that fails too, the nearest interior fTetWild vertices are moved onto
     the samples (a move that would invert a tet is not made; the next nearest vertex is tried),
-    and a sample none of whose nearby vertices can move is inserted as a new vertex. Either way a :class:`MeshingWarning` says so (the snapping one reports the largest move),
-    and the surface rows no longer match ``V`` (:func:`skin_weights` then interpolates).
+    and a sample none of whose nearby vertices can move is inserted as a new vertex. Either way
+    a :class:`MeshingWarning` says so (the snapping one reports the largest move), and the
+    surface rows no longer match ``V`` (:func:`skin_weights` then interpolates).
 
     Parameters
     ----------
@@ -477,8 +478,12 @@ def _bone_segments(S, handles, insert, nP, nB):
     return np.array(segs, np.int64).reshape(-1, 2)
 
 
+# The faces of a positively oriented tet, each opposite one corner and oriented outward.
+_TET_FACES = [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]]
+
+
 def _boundary_faces(T):
-    faces = np.vstack([T[:, [1, 2, 3]], T[:, [0, 3, 2]], T[:, [0, 1, 3]], T[:, [0, 2, 1]]])
+    faces = T[:, _TET_FACES].reshape(-1, 3)
     _, inv, cnt = np.unique(np.sort(faces, axis=1), axis=0, return_inverse=True, return_counts=True)
     return faces[cnt[inv.reshape(-1)] == 1]
 
@@ -578,7 +583,7 @@ def _insert_vertex(V, T, p, vmin: float, max_tets: int = 64):
     lies on or behind that face), the tet across the face joins the cavity.
 
     Returns the new vertices, the new tets and the index of the new vertex."""
-    faces = T[:, [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]]]  # (m, 4, 3), outward
+    faces = T[:, _TET_FACES]  # (m, 4, 3)
     key = np.sort(faces, axis=2).reshape(-1, 3)
     _, face_id = np.unique(key, axis=0, return_inverse=True)
     face_id = face_id.reshape(-1, 4)
@@ -610,14 +615,21 @@ def _insert_vertex(V, T, p, vmin: float, max_tets: int = 64):
     return Vn, np.vstack([T[keep], fan]).astype(T.dtype), q
 
 
-def _containing_tet(V, T, p) -> int:
-    """The tet of ``(V, T)`` whose smallest barycentric coordinate of ``p`` is largest."""
+def _barycentric(V, T, p):
+    """Barycentric coordinates ``(m, 4)`` of the point ``p`` in each tet of ``(V, T)``; rows of
+    flat tets are ``-inf``."""
     X = V[T]
     A = np.transpose(X[:, 1:] - X[:, :1], (0, 2, 1))  # (m, 3, 3): columns are edges from corner 0
     ok = np.abs(np.linalg.det(A)) > 0
     lam = np.full((len(T), 4), -np.inf)
     lam[ok, 1:] = np.linalg.solve(A[ok], (p - X[ok, 0])[..., None])[..., 0]
     lam[ok, 0] = 1 - lam[ok, 1:].sum(axis=1)
+    return lam
+
+
+def _containing_tet(V, T, p) -> int:
+    """The tet of ``(V, T)`` whose smallest barycentric coordinate of ``p`` is largest."""
+    lam = _barycentric(V, T, p)
     t = int(np.argmax(lam.min(axis=1)))
     if lam[t].min() < -1e-9:
         raise ValueError(f"the handle sample {p.tolist()} lies outside the fallback mesh")
@@ -694,17 +706,10 @@ def _interpolate(Q, Vv, T, W):
             inc[v].append(t)
     out = np.empty((len(Q), W.shape[1]))
     for i, (q, v) in enumerate(zip(Q, near, strict=True)):
-        best, lam_best = None, None
-        for t in inc[v]:
-            X = Vv[T[t]]
-            try:
-                lam = np.linalg.solve((X[1:] - X[0]).T, q - X[0])
-            except np.linalg.LinAlgError:
-                continue
-            lam = np.r_[1 - lam.sum(), lam]
-            if best is None or lam.min() > lam_best.min():
-                best, lam_best = t, lam
-        lam = np.clip(lam_best, 0, None)
+        around = T[inc[v]]
+        lam = _barycentric(Vv, around, q)
+        best = int(np.argmax(lam.min(axis=1)))
+        lam = np.clip(lam[best], 0, None)
         lam /= lam.sum()
-        out[i] = lam @ W[T[best]]
+        out[i] = lam @ W[around[best]]
     return out
