@@ -17,19 +17,20 @@
 //! with one sparse Cholesky factor per column support, preconditioned by `A / m` (exact when
 //! every support is the whole mesh, where `S = m A^{-1}`); on real rigs that takes 20-30
 //! iterations cold and a handful warm. Entries of the support whose weight came out negative
-//! leave it, entries off it whose multiplier `y` came out negative join it, and the round
-//! repeats until no sign is violated (the KKT conditions then hold to round-off).
+//! leave it, entries off it whose multiplier `y` came out negative join it (damped and
+//! dilated as [`next_support`] explains), and the round repeats until no sign is violated (the
+//! KKT conditions then hold to round-off).
 //!
 //! The first support comes from a short run of the paper's L-BFGS on the dual (a duality gap of
 //! `WARM_GAP`). Every round is certified like the L-BFGS iterates: the projected weights give
-//! an upper bound on the optimal energy, the dual (eq. 12) at `Y = max(y, 0)` a lower bound, and
-//! the solve stops once their relative gap is below `tol`. Without partition of unity
-//! (App. A) the columns decouple and each one is a box-constrained QP solved the same way with
-//! two bounds and no `mu`. Primal-dual active sets are not guaranteed to converge when `A` is not
-//! an M-matrix (the biharmonic one is not), and on fine meshes their own lower bound lags: if the
-//! gap stalls, L-BFGS warm-started from the last multipliers runs for at most `INTERMISSION`
-//! iterations, then the rounds resume until neither of their own bounds moves any more, and
-//! L-BFGS finishes.
+//! an upper bound on the optimal energy, the dual (eq. 12) at `y` made non-negative by
+//! [`spread_negative`] a lower bound, and the solve stops once their relative gap is below
+//! `tol`. Without partition of unity (App. A) the columns decouple and each one is a
+//! box-constrained QP solved the same way with two bounds and no `mu`. Primal-dual active sets
+//! are not guaranteed to converge when `A` is not an M-matrix (the biharmonic one is not): if
+//! the gap stalls, L-BFGS warm-started from the last multipliers runs for at most
+//! `INTERMISSION` iterations, then the rounds resume until neither of their own bounds moves
+//! any more, and L-BFGS finishes.
 
 use std::time::Instant;
 
@@ -170,11 +171,11 @@ fn solve_with_stall(
     let mut outcome = pou_rounds(prob, opts, &mut state, watch, best, info, progress)?;
     info.time_active_set = t.elapsed().as_secs_f64();
     if let Outcome::Stalled(y) = outcome {
-        // The rounds' own lower bound lags far behind their upper bound on fine meshes (big2d
-        // after 12 rounds: gap 7e-4, upper already within 1e-6). A short L-BFGS intermission
-        // from their multipliers lifts it; if that does not close the gap the rounds resume
-        // (their upper bound still falls, and their own lower bound converges too: big2d
-        // reaches 1e-9 in ~50 rounds, where L-BFGS alone crawls for minutes).
+        // The rounds cycle or their lower bound lags (before `spread_negative`, big2d's rounds
+        // stalled at a gap of 7e-4 with the upper bound within 1e-6; now none of the fixtures
+        // comes here). A short L-BFGS intermission from their multipliers lifts the lower
+        // bound; if that does not close the gap the rounds resume (their upper bound still
+        // falls, where L-BFGS alone crawls for minutes).
         fallback_lbfgs(prob, opts, INTERMISSION, &y, best, info, progress)?;
         if best.relative_gap() <= opts.tol {
             return Ok(());
@@ -189,8 +190,8 @@ fn solve_with_stall(
     Ok(())
 }
 
-/// L-BFGS iterations of the first fallback before the rounds resume (big2d: 35-80 lift the
-/// lower bound from a gap of 7e-4 to 1e-6).
+/// L-BFGS iterations of the first fallback before the rounds resume (big2d with clamped
+/// multipliers: 35-80 lifted the lower bound from a gap of 7e-4 to 1e-6).
 const INTERMISSION: usize = 150;
 
 /// L-BFGS on the dual (at most `max_iter` iterations) warm-started from multipliers `y`.
@@ -286,11 +287,23 @@ impl OwnBounds {
 }
 
 /// The rounds' state, kept across an L-BFGS intermission: the support guess
-/// (`support[j * nf + i]`), the partition-of-unity multiplier and the CG tolerance.
+/// (`support[j * nf + i]`), the partition-of-unity multiplier, the CG tolerance and what
+/// decides the dilation of joins ([`next_support`]).
 struct PouState {
     support: Vec<bool>,
     mu: Vec<f64>,
     pou_tol: f64,
+    dilation: Dilation,
+}
+
+/// The last round's own bounds, whether its joins were dilated, and whether dilation is still
+/// allowed.
+#[derive(Clone, Copy)]
+struct Dilation {
+    allowed: bool,
+    last_dilated: bool,
+    last_gap: f64,
+    last_upper: f64,
 }
 
 impl PouState {
@@ -311,6 +324,12 @@ impl PouState {
             support,
             mu: vec![0.0; nf],
             pou_tol: 1e-4,
+            dilation: Dilation {
+                allowed: true,
+                last_dilated: false,
+                last_gap: f64::INFINITY,
+                last_upper: f64::INFINITY,
+            },
         }
     }
 }
@@ -340,6 +359,7 @@ fn pou_rounds(
             support,
             mu,
             pou_tol,
+            dilation,
         } = &mut *state;
         let t = Instant::now();
         let factors = factor_supports(&prob.a, support, nf)?;
@@ -393,28 +413,33 @@ fn pou_rounds(
                 y[k] = grad + mu[k % nf];
             }
         }
-        let (mut n_w, mut n_y) = (0usize, 0usize);
-        let mut next = support.clone();
-        for k in 0..nf * m {
-            if support[k] && w[k] < -1e-12 {
-                next[k] = false;
-                n_w += 1;
-            } else if !support[k] && y[k] < -1e-12 * scale {
-                next[k] = true;
-                n_y += 1;
-            }
-        }
-
-        // Certificate: projected w (upper bound), dual at max(y, 0) (lower bound).
+        // Certificate: projected w (upper bound), dual at y spread to >= 0 (lower bound).
         let feasible = project_pou(&w, nf, m);
         let upper = prob.energy(&feasible);
         best.offer(&w, feasible, upper);
         // The dual's own recovered W(max(y, 0)) is not offered as a primal candidate: it is
         // smooth but nowhere exactly zero, and once projected can win on energy by a hair
         // while sitting 1e-4 off the optimum in flat directions.
-        let y_plus: Vec<f64> = y.iter().map(|v| v.max(0.0)).collect();
+        let mut y_plus = y.clone();
+        spread_negative(&mut y_plus, &prob.a, nf);
         let own = pou_eval(prob, &y_plus);
         let own_lower = own.lower_bound;
+        let own_gap = (upper - own_lower) / upper.abs().max(1e-300);
+        // A gap that fell by less than half in a round means the supports' edges crawl: the
+        // joins then bring their neighbourhoods along. If a dilated round raised the upper
+        // bound, dilation overshoots on this problem (it made the knight cycle): never again.
+        if dilation.last_dilated && upper > dilation.last_upper {
+            dilation.allowed = false;
+        }
+        let dilate = dilation.allowed && own_gap > 0.5 * dilation.last_gap;
+        *dilation = Dilation {
+            allowed: dilation.allowed,
+            last_dilated: dilate,
+            last_gap: own_gap,
+            last_upper: upper,
+        };
+        let thresholds = SignThresholds::new(opts.tol, scale);
+        let (next, n_w, n_y) = next_support(&prob.a, support, &w, &y, thresholds, dilate, nf);
         best.bound(&own);
         progress.report(Event {
             stage: "active-set",
@@ -450,6 +475,164 @@ fn pou_rounds(
         *support = next;
     }
     Ok(Outcome::Done)
+}
+
+/// Makes the multipliers `y` (`nf x m`) non-negative, for the dual lower bound, by moving each
+/// negative entry's mass onto the nearest positive entries of its column, ring by ring of the
+/// graph of `A`.
+///
+/// Any `Y >= 0` gives a lower bound, and its gap to `y`'s (tight but infeasible) Lagrangian is
+/// `1/2 <D, A^{-1} D P_m>` with `D = Y - y`. `A^{-1}` is a smoothing operator (the biharmonic
+/// Green's function), so clamping, whose `D` is a positive bump of every negative entry, loses
+/// a lot, and a `D` that is locally zero-sum almost nothing. On big2d at tol 1e-6 after 12
+/// rounds: relative gap 6.6e-4 clamped, 1.0e-6 spread. The first-order term `<D, w>` is zero
+/// either way (`y` is only non-zero off the support, where `w = 0`).
+fn spread_negative(y: &mut [f64], a: &Csc, nf: usize) {
+    /// Rings searched per negative entry before its remaining mass is dropped (a clamp).
+    const REACH: usize = 3;
+    y.par_chunks_mut(nf).for_each(|col| {
+        let mut stamp = vec![usize::MAX; nf];
+        let (mut ring, mut next) = (Vec::new(), Vec::new());
+        for k in 0..nf {
+            if col[k] >= 0.0 {
+                continue;
+            }
+            let mut deficit = -col[k];
+            col[k] = 0.0;
+            stamp[k] = k;
+            ring.clear();
+            ring.push(k);
+            for _ in 0..REACH {
+                if deficit <= 0.0 || ring.is_empty() {
+                    break;
+                }
+                next.clear();
+                for &r in &ring {
+                    for &i in a.symbolic().row_idx_of_col_raw(r) {
+                        if stamp[i] != k {
+                            stamp[i] = k;
+                            next.push(i);
+                        }
+                    }
+                }
+                let pos: f64 = next.iter().map(|&i| col[i].max(0.0)).sum();
+                if pos > 0.0 {
+                    let take = deficit.min(pos);
+                    let keep = 1.0 - take / pos;
+                    for &i in &next {
+                        if col[i] > 0.0 {
+                            col[i] *= keep;
+                        }
+                    }
+                    deficit -= take;
+                }
+                std::mem::swap(&mut ring, &mut next);
+            }
+        }
+    });
+}
+
+/// The sign tests of a round. Weights and multipliers below these in magnitude are CG and
+/// round-off noise: testing them against 0 (as before) flipped ~20k such entries per round on
+/// big2d and doubled the supports, without changing the bounds.
+#[derive(Clone, Copy)]
+struct SignThresholds {
+    /// A support entry whose weight is below this leaves.
+    leave_below: f64,
+    /// An off-support entry whose multiplier is below this joins.
+    join_below: f64,
+}
+
+impl SignThresholds {
+    fn new(tol: f64, scale: f64) -> Self {
+        SignThresholds {
+            leave_below: 1e-3 * tol,
+            join_below: -0.1 * tol * scale,
+        }
+    }
+}
+
+/// The next support guess from a round's weights `w` and multipliers `y` (all `nf x m`):
+/// returns it with the numbers of sign violations: support entries below `leave_below` (not
+/// all of which leave) and off-support entries below `join_below` (all of which join).
+///
+/// Two rules keep the supports' edges from crawling, as plain primal-dual active sets do on
+/// the biharmonic operator (not an M-matrix; on big2d they took 15 rounds at tol 1e-6):
+/// - A support that reaches too far overshoots: its weights dip negative over a band wider than
+///   the excess, and dropping the whole band cuts into the optimal support, which then creeps
+///   back one neighbourhood per round. So only the outer half of a negative band leaves (entries
+///   no farther, in steps of the graph of `A`, from the support's edge than from its
+///   non-negative part), plus the most negative entry of each neighbourhood, which opens holes.
+///   big2d: 15 -> 12 rounds; hand-403 unchanged at 8.
+/// - A support that falls short only sees negative multipliers right at its edge, so it grows by
+///   one neighbourhood per round. When `dilate` (the rounds crawl), the off-support neighbours
+///   of each joining entry whose multiplier is below the joiner's violation join too. big2d:
+///   12 -> 8 rounds. Always dilating made hand-403 cycle, hence the switch.
+fn next_support(
+    a: &Csc,
+    support: &[bool],
+    w: &[f64],
+    y: &[f64],
+    th: SignThresholds,
+    dilate: bool,
+    nf: usize,
+) -> (Vec<bool>, usize, usize) {
+    let mut next = support.to_vec();
+    let counts: Vec<(usize, usize)> = next
+        .par_chunks_mut(nf)
+        .zip(support.par_chunks(nf))
+        .zip(w.par_chunks(nf).zip(y.par_chunks(nf)))
+        .map(|((nx, sup), (wc, yc))| {
+            let leaving = |i: usize| sup[i] && wc[i] < th.leave_below;
+            let d_edge = graph_distance(a, sup, |i| !sup[i]);
+            let d_kept = graph_distance(a, sup, |i| sup[i] && !leaving(i));
+            let (mut negative, mut joined) = (0, 0);
+            for i in 0..nf {
+                if leaving(i) {
+                    negative += 1;
+                    let nb = a.symbolic().row_idx_of_col_raw(i);
+                    let local_min = nb.iter().all(|&j| !sup[j] || wc[j] >= wc[i]);
+                    if d_edge[i] <= d_kept[i] || local_min {
+                        nx[i] = false;
+                    }
+                } else if !sup[i] && yc[i] < th.join_below {
+                    nx[i] = true;
+                    joined += 1;
+                    if dilate {
+                        for &j in a.symbolic().row_idx_of_col_raw(i) {
+                            if !sup[j] && yc[j] < -yc[i] {
+                                nx[j] = true;
+                            }
+                        }
+                    }
+                }
+            }
+            (negative, joined)
+        })
+        .collect();
+    let (n_w, n_y) = counts.iter().fold((0, 0), |(a, b), &(l, j)| (a + l, b + j));
+    (next, n_w, n_y)
+}
+
+/// Steps in the graph of `A`, moving only through `inside` vertices, from the nearest vertex
+/// where `source` holds (`usize::MAX` where none is reachable).
+fn graph_distance(a: &Csc, inside: &[bool], source: impl Fn(usize) -> bool) -> Vec<usize> {
+    let n = inside.len();
+    let mut d = vec![usize::MAX; n];
+    let mut queue = std::collections::VecDeque::new();
+    for i in (0..n).filter(|&i| source(i)) {
+        d[i] = 0;
+        queue.push_back(i);
+    }
+    while let Some(i) = queue.pop_front() {
+        for &j in a.symbolic().row_idx_of_col_raw(i) {
+            if inside[j] && d[j] == usize::MAX {
+                d[j] = d[i] + 1;
+                queue.push_back(j);
+            }
+        }
+    }
+    d
 }
 
 /// `rowsum(W) - 1` for the `nf x m` column-major `w`.
@@ -599,8 +782,8 @@ fn box_rounds(
         let feasible = project_box(&w);
         let upper = prob.energy(&feasible);
         best.offer(&w, feasible, upper);
-        y.iter_mut().for_each(|v| *v = v.max(0.0));
-        u.iter_mut().for_each(|v| *v = v.max(0.0));
+        spread_negative(&mut y, &prob.a, nf);
+        spread_negative(&mut u, &prob.a, nf);
         best.bound(&box_eval(prob, &y, &u));
         progress.report(Event {
             stage: "active-set",
