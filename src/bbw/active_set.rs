@@ -829,6 +829,72 @@ mod tests {
         assert_eq!(own.quiet_rounds(8.0 - 1e-7, 6.5, 1e-6), 1);
     }
 
+    /// The pattern of a path graph 0 - 1 - ... - (n-1) (a tridiagonal matrix).
+    fn path(n: usize) -> Csc {
+        let mut trip = Vec::new();
+        for i in 0..n {
+            trip.push(Triplet::new(i, i, 2.0));
+            if i + 1 < n {
+                trip.push(Triplet::new(i, i + 1, -1.0));
+                trip.push(Triplet::new(i + 1, i, -1.0));
+            }
+        }
+        from_triplets(n, n, &trip).unwrap()
+    }
+
+    #[test]
+    fn graph_distance_stays_inside() {
+        let a = path(6);
+        let inside = [true, true, false, true, true, true];
+        let d = graph_distance(&a, &inside, |i| i == 0 || i == 5);
+        assert_eq!(d, vec![0, 1, usize::MAX, 2, 1, 0]);
+    }
+
+    #[test]
+    fn spread_negative_moves_mass_to_the_nearest_positive_entries() {
+        let a = path(7);
+        // A negative entry at 3; positive mass one step away (2) and two steps away (5).
+        let mut y = vec![0.0, 0.0, 0.5, -1.0, 0.0, 2.0, 4.0];
+        spread_negative(&mut y, &a, 7);
+        assert!(y.iter().all(|&v| v >= 0.0), "{y:?}");
+        // Ring 1 {2, 4} holds 0.5: all of it goes; ring 2 {1, 5} pays the remaining 0.5.
+        let want = [0.0, 0.0, 0.0, 0.0, 0.0, 1.5, 4.0];
+        for (got, want) in y.iter().zip(want) {
+            assert!((got - want).abs() < 1e-15, "{y:?}");
+        }
+        // Mass four rings away is out of reach: the deficit is dropped (a clamp) and the
+        // mass stays.
+        let mut y = vec![-1.0, 0.0, 0.0, 0.0, 0.5, 0.0, 0.0];
+        spread_negative(&mut y, &a, 7);
+        assert_eq!(y, vec![0.0, 0.0, 0.0, 0.0, 0.5, 0.0, 0.0]);
+    }
+
+    #[test]
+    fn only_the_outer_half_of_a_negative_band_leaves() {
+        let a = path(14);
+        // Support 0..=9, positive on 0..=5, a negative band 6..=9 deepening outwards.
+        let support: Vec<bool> = (0..14).map(|i| i <= 9).collect();
+        let mut w = vec![0.0; 14];
+        for i in 0..=5 {
+            w[i] = 1.0 - 0.1 * i as f64;
+        }
+        for (k, i) in (6..=9).enumerate() {
+            w[i] = -0.1 * (k + 1) as f64;
+        }
+        let mut y = vec![0.0; 14];
+        y[10] = -1.0; // wants to join
+        y[11] = 0.5; // below the joiner's violation: joins too when dilating
+        y[12] = 2.0;
+        let th = SignThresholds::new(1e-6, 1.0);
+        let (next, negative, joined) = next_support(&a, &support, &w, &y, th, false, 14);
+        assert_eq!((negative, joined), (4, 1));
+        let kept: Vec<usize> = (0..14).filter(|&i| next[i]).collect();
+        // 8 and 9 are no farther from the edge than from the positive part; 6 and 7 stay.
+        assert_eq!(kept, vec![0, 1, 2, 3, 4, 5, 6, 7, 10]);
+        let (next, _, _) = next_support(&a, &support, &w, &y, th, true, 14);
+        assert!(next[10] && next[11] && !next[12]);
+    }
+
     /// A `k x k` grid of the unit square with handles at three corners and the centre.
     fn grid_problem(k: usize) -> EliminatedProblem {
         let h = 1.0 / (k - 1) as f64;
