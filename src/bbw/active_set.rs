@@ -874,13 +874,13 @@ mod tests {
         let a = path(14);
         // Support 0..=9, positive on 0..=5, a negative band 6..=9 deepening outwards.
         let support: Vec<bool> = (0..14).map(|i| i <= 9).collect();
-        let mut w = vec![0.0; 14];
-        for i in 0..=5 {
-            w[i] = 1.0 - 0.1 * i as f64;
-        }
-        for (k, i) in (6..=9).enumerate() {
-            w[i] = -0.1 * (k + 1) as f64;
-        }
+        let w: Vec<f64> = (0..14)
+            .map(|i| match i {
+                0..=5 => 1.0 - 0.1 * i as f64,
+                6..=9 => -0.1 * (i - 5) as f64,
+                _ => 0.0,
+            })
+            .collect();
         let mut y = vec![0.0; 14];
         y[10] = -1.0; // wants to join
         y[11] = 0.5; // below the joiner's violation: joins too when dilating
