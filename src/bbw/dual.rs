@@ -11,7 +11,10 @@
 //! primal optimum, and the projection of `W` onto the primal feasible set (clamp, and renormalise
 //! rows for partition of unity) is an upper bound.
 
+use rayon::prelude::*;
+
 use super::problem::EliminatedProblem;
+use super::vector;
 
 /// One evaluation of a dual: objective, the recovered primal `W` (= gradient w.r.t. `Y`) and the
 /// certificate pieces.
@@ -28,22 +31,32 @@ pub struct DualPoint {
 pub fn pou_eval(p: &EliminatedProblem, y: &[f64]) -> DualPoint {
     let (nf, m) = (p.nf(), p.m);
     // Y P_m: subtract each row's mean (eq. 13).
-    let mut x = y.to_vec();
-    for i in 0..nf {
-        let mean = (0..m).map(|c| y[c * nf + i]).sum::<f64>() / m as f64;
-        for c in 0..m {
-            x[c * nf + i] -= mean;
-        }
+    let mut mean = vec![0.0; nf];
+    for col in y.chunks(nf) {
+        mean.par_iter_mut().zip(col).for_each(|(a, v)| *a += v);
     }
+    mean.par_iter_mut().for_each(|a| *a /= m as f64);
+    let mut x = vec![0.0; nf * m];
+    x.par_chunks_mut(nf)
+        .zip(y.par_chunks(nf))
+        .for_each(|(xc, yc)| {
+            xc.iter_mut()
+                .zip(yc.iter().zip(&mean))
+                .for_each(|(x, (y, a))| *x = y - a);
+        });
     p.solve_in_place(&mut x); // x = Q11 Y P_m; its rows have zero mean.
-    let w: Vec<f64> = p.w0.iter().zip(&x).map(|(a, b)| a + b).collect();
-    let yx: f64 = y.iter().zip(&x).map(|(a, b)| a * b).sum();
-    let yw0: f64 = y.iter().zip(&p.w0).map(|(a, b)| a * b).sum();
+    let w: Vec<f64> =
+        p.w0.par_iter()
+            .zip(x.par_iter())
+            .map(|(a, b)| a + b)
+            .collect();
+    let yx = dot(y, &x);
+    let yw0 = dot(y, &p.w0);
     let objective = 0.5 * yx + yw0;
     // Lagrangian at W(Y): uses A W = -G + Y P_m, so no extra product is needed.
-    let wg: f64 = w.iter().zip(&p.g).map(|(a, b)| a * b).sum();
-    let wy: f64 = w.iter().zip(y).map(|(a, b)| a * b).sum();
-    let ysum: f64 = y.iter().sum();
+    let wg = dot(&w, &p.g);
+    let wy = yw0 + yx;
+    let ysum: f64 = vector::sum(y);
     let lower_bound = 0.5 * wg - 0.5 * wy - ysum / (2.0 * m as f64) + p.c0;
     DualPoint {
         objective,
@@ -91,6 +104,4 @@ pub fn project_box(w: &[f64]) -> Vec<f64> {
     w.iter().map(|x| x.clamp(0.0, 1.0)).collect()
 }
 
-pub fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
-}
+pub use super::vector::dot;

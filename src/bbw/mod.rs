@@ -12,6 +12,7 @@ pub mod dual;
 pub mod lbfgs;
 pub mod problem;
 mod solve;
+mod vector;
 
 pub use problem::EliminatedProblem;
 pub use solve::{bbw_dual, BbwInfo, BbwOptions, Solver};

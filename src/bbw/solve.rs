@@ -4,6 +4,7 @@ use std::cell::RefCell;
 use std::time::Instant;
 
 use ndarray::Array2;
+use rayon::prelude::*;
 
 use super::dual::{box_eval, pou_eval, project_box, project_pou, DualPoint};
 use super::lbfgs::{minimize, LbfgsOptions, Step};
@@ -204,15 +205,17 @@ pub(crate) fn run_lbfgs(
     let mut evaluations = 0;
     let fg = |u: &[f64], grad: &mut [f64]| -> f64 {
         evaluations += 1;
-        let y: Vec<f64> = u.iter().map(|v| v * v).collect();
+        let y: Vec<f64> = u.par_iter().map(|v| v * v).collect();
         let dp = eval(&y);
         // d f(U o U) / dU = 2 U o grad_Y f, with grad_Y f = W (eq. 16) or (W, 1 - W).
-        for k in 0..nf * m {
-            grad[k] = 2.0 * u[k] * dp.w[k];
-        }
-        for k in nf * m..u.len() {
-            grad[k] = 2.0 * u[k] * (1.0 - dp.w[k - nf * m]);
-        }
+        let (gy, gu) = grad.split_at_mut(nf * m);
+        let (uy, uu) = u.split_at(nf * m);
+        gy.par_iter_mut()
+            .zip(uy.par_iter().zip(dp.w.par_iter()))
+            .for_each(|(g, (u, w))| *g = 2.0 * u * w);
+        gu.par_iter_mut()
+            .zip(uu.par_iter().zip(dp.w.par_iter()))
+            .for_each(|(g, (u, w))| *g = 2.0 * u * (1.0 - w));
         let f = dp.objective;
         *last.borrow_mut() = Some(dp);
         f
