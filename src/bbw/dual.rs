@@ -14,7 +14,7 @@
 use rayon::prelude::*;
 
 use super::problem::EliminatedProblem;
-use super::vector;
+use super::vector::{self, dot};
 
 /// One evaluation of a dual: objective, the recovered primal `W` (= gradient w.r.t. `Y`) and the
 /// certificate pieces.
@@ -103,5 +103,3 @@ pub fn project_pou(w: &[f64], nf: usize, m: usize) -> Vec<f64> {
 pub fn project_box(w: &[f64]) -> Vec<f64> {
     w.iter().map(|x| x.clamp(0.0, 1.0)).collect()
 }
-
-pub use super::vector::dot;
