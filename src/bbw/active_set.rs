@@ -447,6 +447,16 @@ fn pou_rounds(
         let own = pou_eval(prob, &y_plus);
         let own_lower = own.lower_bound;
         let own_gap = (upper - own_lower) / upper.abs().max(1e-300);
+        best.bound(&own);
+        progress.report(Event {
+            stage: "active-set",
+            iteration: round,
+            value: best.relative_gap(),
+        })?;
+        // Certified: the next support (two graph searches per column) is not needed.
+        if best.relative_gap() <= opts.tol {
+            return Ok(Outcome::Done);
+        }
         // A gap that fell by less than half in a round means the supports' edges crawl: the
         // joins then bring their neighbourhoods along. If a dilated round raised the upper
         // bound, dilation overshoots on this problem (it made the knight cycle): never again.
@@ -459,15 +469,6 @@ fn pou_rounds(
         dilation.last_upper = upper;
         let thresholds = SignThresholds::new(opts.tol, scale);
         let (next, n_w, n_y) = next_support(&prob.a, support, &w, &y, thresholds, dilate, nf);
-        best.bound(&own);
-        progress.report(Event {
-            stage: "active-set",
-            iteration: round,
-            value: best.relative_gap(),
-        })?;
-        if best.relative_gap() <= opts.tol {
-            return Ok(Outcome::Done);
-        }
         let exact = n_w == 0 && n_y == 0;
         if exact && *pou_tol <= POU_FLOOR * opts.tol {
             // Every KKT sign holds and PoU to round-off: this is the optimum; the gap is as
