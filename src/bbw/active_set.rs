@@ -404,7 +404,8 @@ fn pou_rounds(
             }
             w
         };
-        let apply_s = |x: &[f64]| -> Vec<f64> {
+        // `S x` and, per column, `A_FF^{-1} x[F]`.
+        let apply_s = |x: &[f64]| -> (Vec<f64>, Vec<Vec<f64>>) {
             let cols: Vec<Vec<f64>> = factors.par_iter().map(|f| f.solve_gathered(x)).collect();
             let mut out = vec![0.0; nf];
             for (f, col) in factors.iter().zip(&cols) {
@@ -412,17 +413,27 @@ fn pou_rounds(
                     out[i] += v;
                 }
             }
-            out
+            (out, cols)
         };
-        // S delta = rowsum(W(mu)) - 1, warm-started at the previous round's mu.
-        let w_mu = weights(mu);
-        let residual = row_sums_minus_one(&w_mu, nf, m);
+        // S delta = rowsum(W(mu)) - 1, warm-started at the previous round's mu. W is linear in
+        // mu, so W(mu + delta) = W(mu) - sum_k alpha_k A_FF^{-1} p_k is accumulated from the
+        // solves CG makes anyway (recomputing it cost one more solve per column).
+        let mut w = weights(mu);
+        let residual = row_sums_minus_one(&w, nf, m);
         let t = Instant::now();
-        let (delta, iters) = pcg(prob, apply_s, &residual, *pou_tol, progress)?;
+        let step = |alpha: f64, cols: &Vec<Vec<f64>>| {
+            w.par_chunks_mut(nf)
+                .zip(factors.par_iter().zip(cols))
+                .for_each(|(wc, (f, col))| {
+                    for (&i, &v) in f.idx.iter().zip(col) {
+                        wc[i] -= alpha * v;
+                    }
+                });
+        };
+        let (delta, iters) = pcg(prob, apply_s, step, &residual, *pou_tol, progress)?;
         info.time_cg += t.elapsed().as_secs_f64();
         info.cg_iterations += iters;
         mu.iter_mut().zip(&delta).for_each(|(u, d)| *u += d);
-        let w = weights(mu);
 
         // Multipliers y = A w + g + mu on the zero set (eq. 15 read backwards).
         let aw = prob.apply_a(&w);
@@ -667,9 +678,12 @@ fn row_sums_minus_one(w: &[f64], nf: usize, m: usize) -> Vec<f64> {
 
 /// Preconditioned conjugate gradients for `S x = b` from `x = 0`, preconditioner `A / m`; stops
 /// when `max |b - S x| <= tol` (a partition-of-unity violation, so an absolute weight error).
-fn pcg(
+/// `apply_s(p)` returns `S p` and what its caller keeps of the product (`T`), handed back as
+/// `step(alpha, &T)` when `x` moves by `alpha p`.
+fn pcg<T>(
     prob: &EliminatedProblem,
-    apply_s: impl Fn(&[f64]) -> Vec<f64>,
+    apply_s: impl Fn(&[f64]) -> (Vec<f64>, T),
+    mut step: impl FnMut(f64, &T),
     b: &[f64],
     tol: f64,
     progress: &mut dyn Progress,
@@ -694,13 +708,14 @@ fn pcg(
     let mut rz = dot(&r, &z);
     // CG on an SPD system of size n converges in n steps in exact arithmetic; far fewer here.
     for it in 1..=n.max(1) {
-        let q = apply_s(&p);
+        let (q, aux) = apply_s(&p);
         let pq = dot(&p, &q);
         if pq.is_nan() || pq <= 0.0 {
             return Ok((x, it)); // round-off has taken over: keep what we have
         }
         let alpha = rz / pq;
         x.iter_mut().zip(&p).for_each(|(xi, pi)| *xi += alpha * pi);
+        step(alpha, &aux);
         r.iter_mut().zip(&q).for_each(|(ri, qi)| *ri -= alpha * qi);
         progress.report(Event {
             stage: "active-set cg",
