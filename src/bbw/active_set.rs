@@ -136,13 +136,51 @@ impl SupportFactor {
     }
 }
 
-/// Factors `A` on every column's support (`support[j * nf + i]`), in parallel over columns.
+/// Factors `A` on every column's support (`support[j * nf + i]`), in parallel over columns,
+/// largest support first.
 fn factor_supports(a: &Csc, support: &[bool], nf: usize) -> SkinResult<Vec<SupportFactor>> {
-    support
+    let idx: Vec<Vec<usize>> = support
         .par_chunks(nf)
-        .map(|col| {
-            let idx: Vec<usize> = (0..nf).filter(|&i| col[i]).collect();
-            SupportFactor::new(a, idx)
+        .map(|col| (0..nf).filter(|&i| col[i]).collect())
+        .collect();
+    let sizes: Vec<usize> = idx.iter().map(Vec::len).collect();
+    longest_first(&sizes, |j| SupportFactor::new(a, idx[j].clone()))
+        .into_iter()
+        .collect()
+}
+
+/// `[f(0), ..., f(n - 1)]`, computed on the rayon pool longest job first: each worker takes the
+/// next index in decreasing `cost` (greedy list scheduling). The columns' supports differ in
+/// size by 2-3x; rayon's even split of big2d's 8 columns over 2 threads left one idle for
+/// 10-15 % of each round's factorisations.
+fn longest_first<T: Send>(cost: &[usize], f: impl Fn(usize) -> T + Sync) -> Vec<T> {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    use std::sync::Mutex;
+    let mut order: Vec<usize> = (0..cost.len()).collect();
+    order.sort_by_key(|&i| std::cmp::Reverse(cost[i]));
+    let next = AtomicUsize::new(0);
+    let slots: Vec<Mutex<Option<T>>> = (0..cost.len()).map(|_| Mutex::new(None)).collect();
+    let workers = rayon::current_num_threads().min(cost.len());
+    rayon::scope(|s| {
+        for _ in 0..workers {
+            s.spawn(|_| {
+                while let Some(&i) = order.get(next.fetch_add(1, Ordering::Relaxed)) {
+                    let out = f(i);
+                    if let Ok(mut slot) = slots[i].lock() {
+                        *slot = Some(out);
+                    }
+                }
+            });
+        }
+    });
+    // The workers take every index once (a panic in `f` propagates out of the scope).
+    slots
+        .into_iter()
+        .map(|s| {
+            s.into_inner()
+                .ok()
+                .flatten()
+                .expect("every index is computed")
         })
         .collect()
 }
@@ -386,16 +424,13 @@ fn pou_rounds(
         let t = Instant::now();
         let factors = factor_supports(&prob.a, support, nf)?;
         info.time_support_factor += t.elapsed().as_secs_f64();
+        let sizes: Vec<usize> = factors.iter().map(|f| f.idx.len()).collect();
         let weights = |mu: &[f64]| -> Vec<f64> {
-            let cols: Vec<Vec<f64>> = factors
-                .par_iter()
-                .enumerate()
-                .map(|(j, f)| {
-                    let gj = &prob.g[j * nf..(j + 1) * nf];
-                    let rhs: Vec<f64> = gj.iter().zip(mu).map(|(g, u)| g + u).collect();
-                    f.solve_gathered(&rhs)
-                })
-                .collect();
+            let cols = longest_first(&sizes, |j| {
+                let gj = &prob.g[j * nf..(j + 1) * nf];
+                let rhs: Vec<f64> = gj.iter().zip(mu).map(|(g, u)| g + u).collect();
+                factors[j].solve_gathered(&rhs)
+            });
             let mut w = vec![0.0; nf * m];
             for (j, (f, col)) in factors.iter().zip(&cols).enumerate() {
                 for (&i, &v) in f.idx.iter().zip(col) {
@@ -406,7 +441,7 @@ fn pou_rounds(
         };
         // `S x` and, per column, `A_FF^{-1} x[F]`.
         let apply_s = |x: &[f64]| -> (Vec<f64>, Vec<Vec<f64>>) {
-            let cols: Vec<Vec<f64>> = factors.par_iter().map(|f| f.solve_gathered(x)).collect();
+            let cols = longest_first(&sizes, |j| factors[j].solve_gathered(x));
             let mut out = vec![0.0; nf];
             for (f, col) in factors.iter().zip(&cols) {
                 for (&i, &v) in f.idx.iter().zip(col) {
@@ -519,14 +554,27 @@ fn pou_rounds(
 /// a lot, and a `D` that is locally zero-sum almost nothing. On big2d at tol 1e-6 after 12
 /// rounds: relative gap 6.6e-4 clamped, 1.0e-6 spread. The first-order term `<D, w>` is zero
 /// either way (`y` is only non-zero off the support, where `w = 0`).
+///
+/// Entries above `-NOISE max |y|` are round-off on the optimum's weakly active zeros (where
+/// `y* = 0` too) and are clamped: on big2d 60-70k of each round's ~90k negative entries, whose
+/// ring searches took most of the 40-80 ms this spent per round (now 10-35 ms); the lower
+/// bounds moved by 1e-13 relative.
 fn spread_negative(y: &mut [f64], a: &Csc, nf: usize) {
     /// Rings searched per negative entry before its remaining mass is dropped (a clamp).
     const REACH: usize = 3;
-    y.par_chunks_mut(nf).for_each(|col| {
+    /// Multipliers this far below 0, relative to the largest, are clamped without a search.
+    const NOISE: f64 = 1e-14;
+    let floor = -NOISE * y.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+    // One column per task: the columns' negative entries differ in number several-fold.
+    y.par_chunks_mut(nf).with_max_len(1).for_each(|col| {
         let mut stamp = vec![usize::MAX; nf];
         let (mut ring, mut next) = (Vec::new(), Vec::new());
         for k in 0..nf {
             if col[k] >= 0.0 {
+                continue;
+            }
+            if col[k] > floor {
+                col[k] = 0.0;
                 continue;
             }
             let mut deficit = -col[k];
@@ -614,6 +662,7 @@ fn next_support(
         .par_chunks_mut(nf)
         .zip(support.par_chunks(nf))
         .zip(w.par_chunks(nf).zip(y.par_chunks(nf)))
+        .with_max_len(1)
         .map(|((nx, sup), (wc, yc))| {
             let leaving = |i: usize| sup[i] && wc[i] < th.leave_below;
             let d_edge = graph_distance(a, sup, |i| !sup[i]);
