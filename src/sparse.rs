@@ -6,6 +6,9 @@ use faer::Side;
 
 use crate::error::{SkinError, SkinResult};
 
+mod tree_llt;
+pub(crate) use tree_llt::TreeLlt;
+
 /// Compressed sparse column matrix with `usize` indices, the crate's one sparse type.
 pub type Csc = SparseColMat<usize, f64>;
 

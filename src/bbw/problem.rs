@@ -2,17 +2,14 @@
 
 use std::time::Instant;
 
-use faer::linalg::solvers::Solve;
-use faer::sparse::linalg::solvers::Llt;
 use faer::sparse::Triplet;
-use faer::MatMut;
 use ndarray::ArrayView2;
 use rayon::prelude::*;
 
 use crate::error::{SkinError, SkinResult};
 use crate::invalid;
 pub(crate) use crate::sparse::cholesky;
-use crate::sparse::{from_triplets, Csc};
+use crate::sparse::{from_triplets, Csc, TreeLlt};
 
 /// The BBW quadratic restricted to the free vertices.
 ///
@@ -37,7 +34,7 @@ pub struct EliminatedProblem {
     pub c0: f64,
     /// Unconstrained biharmonic weights `W0 = -A^{-1} G` (`= R` of eq. 14, since `W0 1 = 1`).
     pub w0: Vec<f64>,
-    llt: Llt<usize, f64>,
+    llt: TreeLlt,
     /// Seconds spent in assembly + factorisation.
     pub time_factor: f64,
 }
@@ -106,7 +103,7 @@ impl EliminatedProblem {
             }
         }
         let a = from_triplets(nf, nf, &trip)?;
-        let llt = cholesky(&a).map_err(|e| {
+        let llt = TreeLlt::new(&a).map_err(|e| {
             SkinError::Numerical(format!(
                 "B_ff is not positive definite ({e}); check for degenerate elements or a \
                  component without constrained vertices"
@@ -144,15 +141,8 @@ impl EliminatedProblem {
         if nf == 0 {
             return;
         }
-        let cols = x.len() / nf;
-        // The factor is shared read-only; independent right-hand sides are split across the
-        // rayon threads (faer itself runs sequentially, see `py::_skinrs`).
-        let per = cols.div_ceil(rayon::current_num_threads()).max(1);
-        x.par_chunks_mut(per * nf).for_each(|chunk| {
-            let k = chunk.len() / nf;
-            let mat = MatMut::from_column_major_slice_mut(chunk, nf, k);
-            self.llt.solve_in_place(mat);
-        });
+        // The tree split runs the factor's independent subtrees on the rayon threads.
+        self.llt.solve_in_place(x);
     }
 
     /// `A x` for an `nf x k` column-major block (parallel over columns).
