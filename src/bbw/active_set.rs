@@ -139,14 +139,17 @@ impl SupportFactor {
 /// Factors `A` on every column's support (`support[j * nf + i]`), in parallel over columns,
 /// largest support first.
 fn factor_supports(a: &Csc, support: &[bool], nf: usize) -> SkinResult<Vec<SupportFactor>> {
-    let idx: Vec<Vec<usize>> = support
-        .par_chunks(nf)
-        .map(|col| (0..nf).filter(|&i| col[i]).collect())
+    let columns: Vec<&[bool]> = support.chunks(nf).collect();
+    let sizes: Vec<usize> = columns
+        .par_iter()
+        .map(|col| col.iter().filter(|&&s| s).count())
         .collect();
-    let sizes: Vec<usize> = idx.iter().map(Vec::len).collect();
-    longest_first(&sizes, |j| SupportFactor::new(a, idx[j].clone()))
-        .into_iter()
-        .collect()
+    longest_first(&sizes, |j| {
+        let idx = (0..nf).filter(|&i| columns[j][i]).collect();
+        SupportFactor::new(a, idx)
+    })
+    .into_iter()
+    .collect()
 }
 
 /// `[f(0), ..., f(n - 1)]`, computed on the rayon pool longest job first: each worker takes the
