@@ -106,12 +106,16 @@ impl TreeLlt {
             return self.faer_solve(x, k);
         };
         // The factor is of `P A P^T`: permute in (to row-major), solve, permute out.
-        let fwd: Vec<usize> = match self.symbolic.perm() {
-            Some(p) => p.arrays().0.to_vec(),
-            None => (0..n).collect(),
+        let identity: Vec<usize>;
+        let fwd: &[usize] = match self.symbolic.perm() {
+            Some(p) => p.arrays().0,
+            None => {
+                identity = (0..n).collect();
+                &identity
+            }
         };
         let mut y = vec![0.0; n * k];
-        y.par_chunks_mut(k).zip(&fwd).for_each(|(row, &f)| {
+        y.par_chunks_mut(k).zip(fwd).for_each(|(row, &f)| {
             for (j, r) in row.iter_mut().enumerate() {
                 *r = x[j * n + f];
             }
@@ -122,11 +126,11 @@ impl TreeLlt {
         };
         self.forward(&ln, &mut y, k);
         self.backward(&ln, &mut y, k);
-        for (row, &f) in y.chunks_exact(k).zip(&fwd) {
-            for (j, &r) in row.iter().enumerate() {
-                x[j * n + f] = r;
+        x.par_chunks_mut(n).enumerate().for_each(|(j, col)| {
+            for (i, &f) in fwd.iter().enumerate() {
+                col[f] = y[i * k + j];
             }
-        }
+        });
     }
 
     /// `L y = b` (`y` row-major): each part on a private copy (its updates reach only its own
@@ -136,21 +140,23 @@ impl TreeLlt {
         let copies = self.on_copies(y, |part, z, tmp| {
             part.iter().for_each(|&s| ln.forward_step(s, z, k, tmp));
         });
-        let base: Vec<f64> = self
-            .top
-            .iter()
-            .flat_map(|&s| ln.rows(s, y, k))
-            .copied()
-            .collect();
-        self.take_own_rows(ln, &copies, y, k);
-        for z in &copies {
-            // Ancestors' rows: add this part's change.
-            let mut t = 0;
-            for &s in &self.top {
-                let (c0, c1) = ln.cols(s);
-                for i in c0 * k..c1 * k {
-                    y[i] += z[i] - base[t];
-                    t += 1;
+        if !copies.is_empty() {
+            let base: Vec<f64> = self
+                .top
+                .iter()
+                .flat_map(|&s| ln.rows(s, y, k))
+                .copied()
+                .collect();
+            self.take_own_rows(ln, &copies, y, k);
+            for z in &copies {
+                // Ancestors' rows: add this part's change.
+                let mut t = 0;
+                for &s in &self.top {
+                    let (c0, c1) = ln.cols(s);
+                    for i in c0 * k..c1 * k {
+                        y[i] += z[i] - base[t];
+                        t += 1;
+                    }
                 }
             }
         }
