@@ -84,15 +84,17 @@ def run_case(case, slow=True, limit=900.0, repeat=1):
     # on where the warm start from that random point stops (hand-403: 7-14 over seeds 0-6).
     # Their rows hold the median time and the results of seed 0; the speed-up line the ratio
     # of the medians and of each pair.
-    t_ours, t_ref = [], []
+    t_ours, t_ref, rounds = [], [], []
     for seed in range(repeat):
         dt, out_k = _timed(ours, "active-set", 1e-6, seed)
         t_ours.append(dt)
+        rounds.append(out_k[1]["rounds"])
         dt, ref_k = _timed(paper_reference.paper_dual_lbfgs, V, T, b, bc, tol=1e-6, seed=seed)
         t_ref.append(dt)
         if seed == 0:
             out, ref = out_k, ref_k
     rows = [ours_row("active-set", 1e-6, t_ours, out)]
+    rows[0]["rounds_per_seed"] = rounds
     for solver, tol in [("active-set", 1e-8), ("lbfgs-squared", 1e-6)]:
         dt, out2 = _timed(ours, solver, tol)
         rows.append(ours_row(solver, tol, [dt], out2))
@@ -184,6 +186,16 @@ def print_table(case, rows):
                         " per seed " + ", ".join(f"{x:.1f}x" for x in ratios) + ")"
                     )
                 print(line)
+                if paired and "rounds_per_seed" in ours:
+                    print(
+                        f"  per seed, skinrs {solver} s (rounds) / {ref} s: "
+                        + ", ".join(
+                            f"{o:.2f} ({k}) / {r:.2f}"
+                            for o, k, r in zip(
+                                ours["times"], ours["rounds_per_seed"], by[ref]["times"]
+                            )
+                        )
+                    )
 
 
 def main(argv=None) -> int:
