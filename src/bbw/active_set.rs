@@ -645,11 +645,12 @@ impl SignThresholds {
 
 /// The next support guess from a round's weights `w` and multipliers `y` (all `nf x m`):
 /// returns it with the numbers of sign violations: support entries below `leave_below` (not
-/// not all of which leave) and off-support entries below `join_below` (at most one per row
-/// joins, below).
+/// all of which leave) and off-support entries below `join_below` (at most one per row joins,
+/// below).
 ///
-/// Three rules keep the supports' edges from crawling, as plain primal-dual active sets do on
-/// the biharmonic operator (not an M-matrix; on big2d they took 15 rounds at tol 1e-6):
+/// Two rules keep the supports' edges from crawling, as plain primal-dual active sets do on
+/// the biharmonic operator (not an M-matrix; on big2d they took 15 rounds at tol 1e-6), and a
+/// third keeps the supports from overgrowing:
 /// - A support that reaches too far overshoots: its weights dip negative over a band wider than
 ///   the excess, and dropping the whole band cuts into the optimal support, which then creeps
 ///   back one neighbourhood per round. So only the outer half of a negative band leaves (entries
@@ -719,10 +720,10 @@ fn next_support(
 ///
 /// Partition of unity couples a row's columns through its multiplier `mu_i`: where a row's
 /// support is wrong, `mu_i` is off and `y_ij = (A w + g)_ij + mu_i` comes out negative in
-/// most of its columns at once. On hand-403 at seed 6, 1,000-1,900 rows per round had 5-19
-/// columns with `y < 0`, only a tenth of those columns belong to the optimal support (weight
-/// above 1e-7), and the most negative one is the right one about half the time (the second
-/// most negative a fifth). Joining them all grew the supports to 50-60k entries against 29k
+/// most of its columns at once. On hand-403 at seed 6 (traced with dilation off), 1,000-1,900
+/// rows per round had 5-19 columns with `y < 0`, only a tenth of those columns belong to the
+/// optimal support (weight above 1e-7), and the most negative one is a right one 43-69 % of
+/// the time (the second most negative 12-17 %). Joining them all grew the supports to 50-60k entries against 29k
 /// weights above 1e-7 at the optimum, and the next ten rounds peeled them off again; joining
 /// one per row keeps them at 22-38k, which makes every round cheaper, for about as many
 /// rounds. Seeds 0-6 at tol 1e-6: hand-403 16.96 -> 12.56 s in all (72 -> 78 rounds), big2d
