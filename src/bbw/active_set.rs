@@ -723,12 +723,17 @@ fn next_support(
 /// most of its columns at once. On hand-403 at seed 6 (traced with dilation off), 1,000-1,900
 /// rows per round had 5-19 columns with `y < 0`, only a tenth of those columns belong to the
 /// optimal support (weight above 1e-7), and the most negative one is a right one 43-69 % of
-/// the time (the second most negative 12-17 %). Joining them all grew the supports to 50-60k entries against 29k
-/// weights above 1e-7 at the optimum, and the next ten rounds peeled them off again; joining
-/// one per row keeps them at 22-38k, which makes every round cheaper, for about as many
-/// rounds. Seeds 0-6 at tol 1e-6: hand-403 16.96 -> 12.56 s in all (72 -> 78 rounds), big2d
-/// 52.3 -> 47.0 s (68 -> 65 rounds). Letting two or four join per row, or every column within
-/// a factor of 0.5 or 0.8 of the row's most negative, fell in between.
+/// the time (the second most negative 12-17 %). Joining them all grew the supports to
+/// 50-60k entries against 29k weights above 1e-7 at the optimum, and the next ten rounds
+/// peeled them off again; joining one per row keeps them at 22-38k, which makes every round
+/// cheaper, for about as many rounds. Seeds 0-6 at tol 1e-6: hand-403 16.96 -> 12.56 s in
+/// all (72 -> 78 rounds), big2d 52.3 -> 47.0 s (68 -> 65 rounds). Letting two or four join
+/// per row, or every column within a factor of 0.5 or 0.8 of the row's most negative, fell
+/// in between.
+///
+/// The neighbours a dilated join brings along ([`next_support`]) are not limited per row:
+/// limiting them to rows whose own choice is the same column cost big2d 5 more rounds and 6 %
+/// more time over seeds 0-6.
 fn row_joiners(support: &[bool], y: &[f64], join_below: f64, nf: usize) -> Vec<usize> {
     let m = support.len() / nf.max(1);
     (0..nf)
