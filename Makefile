@@ -4,6 +4,8 @@
 PYTHON ?= python3
 VENV   ?= .venv
 PY     := $(VENV)/bin/python
+BLENDER_VENV ?= .venv-blender
+export SKINRS_BLENDER_PYTHON := $(abspath $(BLENDER_VENV))/bin/python
 DATA   ?= $(abspath ../shared/data)
 export SKINRS_DATA := $(DATA)
 
@@ -13,10 +15,20 @@ $(VENV)/.deps: pyproject.toml Makefile
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q "maturin>=1.5,<2" numpy scipy matplotlib tqdm pytest libigl gpytoolbox \
-	    clarabel osqp triangle tetgen pytetwild pyvista nbmake ipykernel ruff meshio trimesh
+	    clarabel osqp triangle tetgen pytetwild pyvista nbmake ipykernel ruff meshio trimesh \
+	    pygltflib
 	touch $@
 
-venv: $(VENV)/.deps
+# Blender as a Python module (skinrs[blender]; a 375 MB wheel, 1 GB installed) for the test that
+# imports our .glb into Blender. bpy pins numpy < 2 and Python 3.11, so it gets its own venv; the
+# test runs it in a subprocess and skips (saying why) when this step could not install it.
+$(BLENDER_VENV)/.deps: pyproject.toml Makefile
+	$(PYTHON) -m venv $(BLENDER_VENV)
+	$(BLENDER_VENV)/bin/python -m pip install -q "bpy>=4.2" \
+	    || echo "bpy is not installable for $$($(PYTHON) --version): the Blender test will skip"
+	touch $@
+
+venv: $(VENV)/.deps $(BLENDER_VENV)/.deps
 
 build: venv
 	VIRTUAL_ENV=$(abspath $(VENV)) $(PY) -m maturin develop --release -q
@@ -41,4 +53,4 @@ bench: build
 	$(PY) -m skinrs.bench bbw
 
 clean:
-	rm -rf $(VENV) target out
+	rm -rf $(VENV) $(BLENDER_VENV) target out

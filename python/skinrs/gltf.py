@@ -1,0 +1,297 @@
+"""glTF 2.0 skins, both ways: ``.gltf`` / ``.glb`` through pygltflib (pure Python, MIT).
+
+:func:`write_gltf` turns a mesh, a skinrs skeleton (``C``, ``BE``, ``P``) and weights into a
+skinned asset that Blender, three.js, Godot or Unity load; :func:`read_gltf` reads one back
+(mesh, joint hierarchy, bind pose, weights, animations) in skinrs' conventions. Coordinates are
+written as given (glTF is Y-up, in metres; convert before writing if yours are not).
+
+How bone columns map to joint nodes (docs/gltf.md): column ``c`` of ``W`` is joint node ``c``.
+A bone's node sits at its head, where skinrs' bone turns (:func:`skinrs.forward_kinematics`),
+with +Y along the bone (as Blender's exporter writes bones); child bones' nodes sit at its tail,
+a bone without children gets an end node ``<name>_end`` there (weight 0), and a point handle is
+a node without children. Blender's importer then makes one bone per column with head and tail
+where skinrs has them, and a skinrs pose moves the mesh in Blender as :func:`skinrs.lbs` does
+(tests/test_gltf.py checks this in Blender).
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from . import gltf_rig as rig
+from ._checks import as_elements, as_index_array, as_points
+from .gltf_read import read_gltf
+
+__all__ = ["read_gltf", "write_gltf"]
+
+_ARRAY, _ELEMENTS = 34962, 34963
+_TYPES = {1: "SCALAR", 2: "VEC2", 3: "VEC3", 4: "VEC4", 16: "MAT4"}
+_COMPONENTS = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32,
+               5126: np.float32}  # fmt: skip
+_CODES = {np.dtype(v): k for k, v in _COMPONENTS.items()}
+
+
+def _pygltflib():
+    try:
+        import pygltflib
+    except ImportError as e:  # pragma: no cover - depends on the environment
+        raise ImportError("glTF needs pygltflib: pip install 'skinrs[gltf]'") from e
+    return pygltflib
+
+
+# --------------------------------------------------------------------------------------------
+# writing
+
+
+class _Blob:
+    """One binary buffer: arrays appended 4-byte aligned, one bufferView + accessor each."""
+
+    def __init__(self, g, lib):
+        self.g, self.lib, self.data = g, lib, bytearray()
+
+    def add(self, A, target=None, minmax=False, normalized=False) -> int:
+        A = np.ascontiguousarray(A)
+        self.data += b"\0" * (-len(self.data) % 4)
+        self.g.bufferViews.append(
+            self.lib.BufferView(
+                buffer=0, byteOffset=len(self.data), byteLength=A.nbytes, target=target
+            )
+        )
+        self.data += A.tobytes()
+        flat = A.reshape(len(A), -1)
+        acc = self.lib.Accessor(
+            bufferView=len(self.g.bufferViews) - 1,
+            componentType=_CODES[A.dtype],
+            count=len(A),
+            type=_TYPES[flat.shape[1]],
+            normalized=normalized or None,
+        )
+        if minmax:
+            acc.min, acc.max = flat.min(0).tolist(), flat.max(0).tolist()
+        self.g.accessors.append(acc)
+        return len(self.g.accessors) - 1
+
+
+def _pack(W, k, method, V, F, C, BE, P, poses):
+    """``(indices, weights)`` with at most ``k`` influences per vertex."""
+    if isinstance(W, tuple):
+        I = np.asarray(W[0], dtype=np.int64)
+        A = np.asarray(W[1], dtype=np.float64)
+        if I.ndim != 2 or I.shape != A.shape or I.shape[1] > 8:
+            raise ValueError(
+                f"packed W must be (indices, weights) of shape (n, <= 8), got {I.shape}"
+            )
+        return I, A
+    from .reduce import random_skeleton_poses, reduce_weights
+
+    m = W.shape[1]
+    if m <= k:
+        return np.broadcast_to(np.arange(m), W.shape).copy(), W
+    if method in ("geometric", "poisson") and poses is None:
+        if len(P):
+            raise ValueError(
+                f"method={method!r} needs example poses: pass poses= (point handles have no "
+                "random poses) or method='k-largest'"
+            )
+        poses = random_skeleton_poses(C, BE, 8, seed=0)
+    return reduce_weights(W, k, method, V=V, F=F, bone_transforms=poses)
+
+
+def _joint_weights(I, A, column_joint, n_joints):
+    """Per-vertex joint indices and float32 weights summing to 1 (glTF 3.7.3.3), 4 or 8 wide."""
+    n = len(I)
+    dense = np.zeros((n, n_joints))
+    np.add.at(dense, (np.repeat(np.arange(n), I.shape[1]), column_joint[I].ravel()), A.ravel())
+    if dense.min() < 0:
+        raise ValueError("W has negative weights, which glTF does not allow")
+    s = dense.sum(1)
+    if np.any(s <= 0):
+        raise ValueError(f"vertex {int(np.flatnonzero(s <= 0)[0])} has no weight")
+    k = 4 if I.shape[1] <= 4 else 8
+    order = np.argsort(-dense, axis=1, kind="stable")[:, :k]
+    Wk = np.take_along_axis(dense, order, 1) / s[:, None]
+    Jk = np.where(Wk > 0, order, 0)
+    W32 = Wk.astype(np.float32)
+    W32[:, 0] += np.float32(1) - W32.sum(1, dtype=np.float32)  # float32 sum as close to 1
+    jt = np.uint8 if n_joints <= 256 else np.uint16
+    return Jk.astype(jt), W32
+
+
+def write_gltf(
+    path,
+    V,
+    F,
+    W,
+    C=None,
+    BE=None,
+    P=None,
+    *,
+    names=None,
+    poses=None,
+    times=None,
+    k=4,
+    method="poisson",
+    asset=None,
+):
+    """Write a skinned mesh as glTF 2.0 (``.glb`` binary or ``.gltf`` with an embedded buffer).
+
+    Parameters
+    ----------
+    path : str or pathlib.Path, ending in ``.glb`` or ``.gltf``
+    V : (n, 3) float; F : (f, 3) int triangles
+    W : (n, #P + #BE) float, one column per point handle then per bone (libigl's order, what
+        :func:`skinrs.skin_weights` returns), or packed ``(indices, weights)`` (n, <= 8)
+    C : (j, 3) float joints; BE : (#BE, 2) int bones (parent -> child); P : (#P,) int handles
+    names : list of str, one per column (default ``handle<i>``, ``bone<b>``)
+    poses : (frames, #P + #BE, 3, 4) float, optional
+        Rigid transforms per column (e.g. :func:`skinrs.forward_kinematics`), written as one
+        animation ``skinrs`` that moves the joint nodes.
+    times : (frames,) float, optional
+        Key times in seconds (default 1/24 s apart).
+    k : 4 or 8
+        Influences per vertex (``JOINTS_0``/``WEIGHTS_0``, plus ``_1`` for 8).
+    method : str
+        :func:`skinrs.reduce_weights` method used when ``W`` has more than ``k`` columns
+        (default ``"poisson"``, fitted on 8 random poses of the skeleton or on ``poses``).
+    asset : dict, optional
+        What :func:`read_gltf` returned: write ``W`` (one column per handle of that asset) onto
+        its joint nodes, keeping their names, hierarchy, bind pose and (unless ``poses`` is
+        given) animations. ``C``, ``BE``, ``P``, ``names`` are then taken from it.
+
+    Weights are reduced, then summed per joint node, normalised (sum 1 in float32) and stored
+    as float32 with unsigned byte (or short, beyond 256 joints) joint indices.
+
+    Examples
+    --------
+    >>> import numpy as np, skinrs
+    >>> V = np.array([[0.0, 0, 0], [0, 1, 0], [1, 0, 0], [0, 0, 1]])
+    >>> F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    >>> C, BE = np.array([[0.0, 0, 0], [0, 1, 0]]), np.array([[0, 1]])
+    >>> skinrs.io.write_gltf("tet.glb", V, F, np.ones((4, 1)), C, BE)   # doctest: +SKIP
+    """
+    lib = _pygltflib()
+    path = os.fspath(path)
+    if not path.lower().endswith((".glb", ".gltf")):
+        raise ValueError(f"path must end in .glb or .gltf, got {path!r}")
+    V = as_points(V, "V", dims=(3,))
+    F = as_elements(F, V, "F", cols=3)
+    if k not in (4, 8):
+        raise ValueError(f"k must be 4 or 8 (glTF stores influences in groups of 4), got {k!r}")
+    if asset is not None:
+        j = asset["joints"]
+        C, BE, P = asset["C"], asset["BE"], asset["P"]
+        jnames, parents, bind, column_joint = j["names"], j["parents"], j["bind"], j["column"]
+        animations = j["animations"] if poses is None else []
+    else:
+        if C is None or BE is None:
+            raise ValueError("pass the skeleton C and BE (or asset= from read_gltf)")
+        C = as_points(C, "C", dims=(3,))
+        BE = as_index_array(BE, len(C), "BE", cols=2)
+        P = as_index_array([] if P is None else P, len(C), "P", ndim=1)
+        if np.any(np.linalg.norm(C[BE[:, 1]] - C[BE[:, 0]], axis=1) == 0):
+            raise ValueError("BE has a bone of zero length")
+        default = [f"handle{i}" for i in range(len(P))] + [f"bone{b}" for b in range(len(BE))]
+        if names is not None and len(names) != len(default):
+            raise ValueError(
+                f"names must have one entry per column ({len(default)}), got {len(names)}"
+            )
+        cols = default if names is None else [str(x) for x in names]
+        jnames, parents, bind, column_joint = rig.skeleton_rig(C, BE, P, cols)
+        animations = []
+    m = len(column_joint)
+    if names is not None and asset is not None:
+        if len(names) != m:
+            raise ValueError(f"names must have one entry per column ({m}), got {len(names)}")
+        jnames = list(jnames)
+        for c, j in enumerate(column_joint):
+            jnames[j] = str(names[c])
+    if not isinstance(W, tuple):
+        W = as_points(W, "W", dims=range(1, 1 << 30))
+        if W.shape != (len(V), m):
+            raise ValueError(
+                f"W must have shape ({len(V)}, {m}) (one column per handle), got {W.shape}"
+            )
+    if poses is not None:
+        poses = np.asarray(poses, dtype=np.float64)
+        if poses.ndim != 4 or poses.shape[1:] != (m, 3, 4):
+            raise ValueError(f"poses must have shape (frames, {m}, 3, 4), got {poses.shape}")
+        t = np.arange(len(poses)) / 24.0 if times is None else np.asarray(times, dtype=float)
+        if t.shape != (len(poses),) or np.any(np.diff(t) <= 0):
+            raise ValueError(
+                f"times must be {len(poses)} increasing seconds, got {np.shape(times)}"
+            )
+        T = rig.joint_poses(poses, column_joint, parents, bind)
+        animations = [{"name": "skinrs", "times": t, "T": T}]
+    I, A = _pack(W, k, method, V, F, C, BE, P, poses)
+    if I.size and (I.min() < 0 or I.max() >= m):
+        raise ValueError(f"packed W refers to column {int(I.max())}, expected 0..{m - 1}")
+    joints, weights = _joint_weights(I, A, column_joint, len(parents))
+
+    g = lib.GLTF2(asset=lib.Asset(version="2.0", generator="skinrs"))
+    blob = _Blob(g, lib)
+    attrs = lib.Attributes(
+        POSITION=blob.add(V.astype(np.float32), _ARRAY, minmax=True),
+        JOINTS_0=blob.add(joints[:, :4], _ARRAY),
+        WEIGHTS_0=blob.add(weights[:, :4], _ARRAY),
+    )
+    if joints.shape[1] == 8:
+        attrs.JOINTS_1 = blob.add(joints[:, 4:], _ARRAY)
+        attrs.WEIGHTS_1 = blob.add(weights[:, 4:], _ARRAY)
+    idx = F.astype(np.uint16 if len(V) < 65536 else np.uint32).reshape(-1)
+    prim = lib.Primitive(attributes=attrs, indices=blob.add(idx, _ELEMENTS), mode=4)
+    g.meshes.append(lib.Mesh(name="skinned", primitives=[prim]))
+    J0 = 2  # node 0: a common root (Panda3D needs one), node 1: the mesh, then the joints
+    local = rig.local_matrices(parents, bind)
+    roots = [J0 + j for j in range(len(parents)) if parents[j] < 0]
+    g.nodes.append(lib.Node(name="skinrs", children=[1] + roots))
+    g.nodes.append(lib.Node(name="skinned", mesh=0, skin=0))
+    for j in range(len(parents)):
+        tr, q, s = rig.decompose(local[j], f"the bind matrix of joint {jnames[j]!r}")
+        node = lib.Node(name=str(jnames[j]), translation=tr.tolist(), rotation=q.tolist())
+        if np.abs(s - 1).max() > 1e-9:
+            node.scale = s.tolist()
+        node.children = [J0 + int(c) for c in np.flatnonzero(parents == j)] or None
+        g.nodes.append(node)
+    ibm = np.linalg.inv(bind).transpose(0, 2, 1).astype(np.float32)  # column-major
+    g.skins.append(
+        lib.Skin(
+            name="skinrs",
+            joints=list(range(J0, J0 + len(parents))),
+            inverseBindMatrices=blob.add(ibm.reshape(-1, 16)),
+            skeleton=0,
+        )
+    )
+    for anim in animations:
+        _write_animation(g, lib, blob, anim, parents, bind, jnames, J0)
+    g.scenes.append(lib.Scene(nodes=[0]))
+    g.scene = 0
+    g.buffers.append(lib.Buffer(byteLength=len(blob.data)))
+    g.set_binary_blob(bytes(blob.data))
+    if path.lower().endswith(".gltf"):
+        g.convert_buffers(lib.BufferFormat.DATAURI)
+        g.save_json(path)
+    else:
+        g.save_binary(path)
+
+
+def _write_animation(g, lib, blob, anim, parents, bind, jnames, J0):
+    t = np.asarray(anim["times"], dtype=np.float64)
+    G = rig.homogeneous(anim["T"]) @ bind  # world matrices of the joints per frame
+    key = blob.add(t.astype(np.float32), minmax=True)
+    channels, samplers = [], []
+    L = np.stack([rig.local_matrices(parents, Gf) for Gf in G])
+    for j in range(len(parents)):
+        trs = [rig.decompose(L[f, j], f"joint {jnames[j]!r} in frame {f}") for f in range(len(t))]
+        tr, q, s = (np.array(x) for x in zip(*trs))
+        q[1:][np.sum(q[1:] * q[:-1], axis=1) < 0] *= -1  # shortest arcs between keys
+        for path_, vals in (("translation", tr), ("rotation", q), ("scale", s)):
+            if path_ == "scale" and np.abs(s - 1).max() <= 1e-9:
+                continue
+            samplers.append(
+                lib.AnimationSampler(input=key, output=blob.add(vals.astype(np.float32)))
+            )
+            target = lib.AnimationChannelTarget(node=J0 + j, path=path_)
+            channels.append(lib.AnimationChannel(sampler=len(samplers) - 1, target=target))
+    g.animations.append(lib.Animation(name=anim["name"], channels=channels, samplers=samplers))

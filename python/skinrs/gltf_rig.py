@@ -1,0 +1,200 @@
+"""The rig math behind :mod:`skinrs.gltf`: skinrs skeletons <-> glTF joint nodes.
+
+A glTF skin deforms with one matrix per *joint node*: ``G_j(t) @ IBM_j`` (the node's world
+matrix times its inverse bind matrix). A skinrs skeleton has joints ``C`` and bones ``BE``,
+bone ``b`` turning about its head ``C[BE[b, 0]]``. So a bone is a joint node placed at its head
+whose children sit at its tail; see ``docs/gltf.md`` for how files map both ways.
+
+Matrices here are 4x4 world matrices (float64); a rig is described by
+
+- ``parents`` (J,): parent joint of each joint node, -1 for a root;
+- ``bind`` (J, 4, 4): world matrix of each joint in the bind pose (inverse of its IBM);
+- per-frame skinning transforms ``T`` (f, J, 3, 4): ``G_j(t) @ IBM_j`` (what :func:`skinrs.lbs`
+  takes, identity in the bind pose).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from .skinning import bone_parents
+
+
+def homogeneous(T) -> np.ndarray:
+    """``(..., 3, 4)`` affine transforms as ``(..., 4, 4)`` matrices."""
+    T = np.asarray(T, dtype=np.float64)
+    M = np.zeros(T.shape[:-2] + (4, 4))
+    M[..., :3, :] = T
+    M[..., 3, 3] = 1.0
+    return M
+
+
+def y_to(d: np.ndarray) -> np.ndarray:
+    """The smallest rotation taking +Y to the unit direction ``d`` (3x3)."""
+    y = np.array([0.0, 1.0, 0.0])
+    axis = np.cross(y, d)
+    s, c = np.linalg.norm(axis), float(y @ d)
+    if s < 1e-12:
+        return np.eye(3) if c > 0 else np.diag([1.0, -1.0, -1.0])  # half turn about X
+    return Rotation.from_rotvec(axis / s * np.arctan2(s, c)).as_matrix()
+
+
+def skeleton_rig(C, BE, P, names):
+    """Joint nodes of a skinrs skeleton, one per handle column, plus an end node per leaf bone.
+
+    Column ``c`` (point handles ``P`` first, then bones, as libigl orders weights) is joint
+    ``c``. A bone's node sits at its head with +Y along the bone (as Blender's exporter writes
+    bones); its child bones' nodes sit at its tail, and a bone without children gets an end node
+    there (``<name>_end``, weight 0) so that every bone's tail is in the file.
+
+    Returns ``(names, parents, bind, column_joint)`` with ``column_joint[c] = c``.
+    """
+    nP, m = len(P), len(BE)
+    par = bone_parents(BE, len(C)) if m else np.zeros(0, dtype=np.int64)
+    parents = [-1] * nP + [int(p) + nP if p >= 0 else -1 for p in par]
+    bind = [np.eye(4) for _ in range(nP + m)]
+    for i, p in enumerate(P):
+        bind[i][:3, 3] = C[p]
+    for b, (h, t) in enumerate(BE):
+        d = C[t] - C[h]
+        bind[nP + b][:3, :3] = y_to(d / np.linalg.norm(d))
+        bind[nP + b][:3, 3] = C[h]
+    names = list(names)
+    leaves = np.setdiff1d(np.arange(m), par[par >= 0])
+    for b in leaves:
+        names.append(f"{names[nP + b]}_end")
+        parents.append(nP + int(b))
+        end = bind[nP + b].copy()
+        end[:3, 3] = C[BE[b, 1]]
+        bind.append(end)
+    return names, np.array(parents, dtype=np.int64), np.array(bind), np.arange(nP + m)
+
+
+def handles_of_rig(parents, bind, weights_used, tol):
+    """The skinrs skeleton seen in glTF joint nodes: ``(C, BE, P, column_joint)``.
+
+    A joint with children at other points gives one bone per distinct child point (head at the
+    joint, tail at the child), all driven by that joint; a joint with no such child that carries
+    weight is a point handle; one that carries none only marks where its parent's bone ends.
+    Points closer than ``tol`` are one joint of ``C``; joints are numbered in order of first
+    appearance (point handles, then each bone's head and tail).
+    """
+    J = len(parents)
+    pos = bind[:, :3, 3]
+    points: list[np.ndarray] = []
+
+    def point(x) -> int:
+        for i, q in enumerate(points):
+            if np.linalg.norm(q - x) <= tol:
+                return i
+        points.append(x)
+        return len(points) - 1
+
+    segments: list[tuple[int, np.ndarray]] = []  # (driving joint, tail position)
+    handles = []
+    for j in range(J):
+        tails: list[np.ndarray] = []
+        for c in np.flatnonzero(parents == j):
+            if np.linalg.norm(pos[c] - pos[j]) > tol and all(
+                np.linalg.norm(pos[c] - t) > tol for t in tails
+            ):
+                tails.append(pos[c])
+        segments += [(j, t) for t in tails]
+        if not tails and weights_used[j]:
+            handles.append(j)
+    P = np.array([point(pos[j]) for j in handles], dtype=np.int64)
+    BE = np.array([(point(pos[j]), point(t)) for j, t in segments], dtype=np.int64)
+    column_joint = np.array(handles + [j for j, _ in segments], dtype=np.int64)
+    C = np.array(points).reshape(-1, 3)
+    return C, BE.reshape(-1, 2), P, column_joint
+
+
+def decompose(M: np.ndarray, what: str):
+    """``(translation, rotation xyzw, scale)`` of an affine 4x4 matrix; shear raises."""
+    A = M[:3, :3]
+    s = np.linalg.norm(A, axis=0)
+    if np.linalg.det(A) < 0:
+        s[0] = -s[0]
+    if np.any(np.abs(s) < 1e-12):
+        raise ValueError(f"{what} is singular and has no glTF translation/rotation/scale")
+    R = A / s
+    if np.abs(R.T @ R - np.eye(3)).max() > 1e-5:
+        raise ValueError(f"{what} has a shear, which a glTF node cannot hold")
+    return M[:3, 3].copy(), Rotation.from_matrix(R).as_quat(), s
+
+
+def local_matrices(parents, world):
+    """Node matrices relative to their parents (``world`` (J, 4, 4) -> (J, 4, 4))."""
+    L = world.copy()
+    has = parents >= 0
+    L[has] = np.linalg.solve(world[parents[has]], world[has])
+    return L
+
+
+def world_matrices(parents, local):
+    """World matrices from parent-relative ones (parents listed before or after children)."""
+    W = np.empty_like(local)
+    done = np.zeros(len(parents), dtype=bool)
+
+    def visit(j):
+        if not done[j]:
+            p = parents[j]
+            W[j] = local[j] if p < 0 else visit(p) @ local[j]
+            done[j] = True
+        return W[j]
+
+    for j in range(len(parents)):
+        visit(j)
+    return W
+
+
+def joint_poses(T_columns, column_joint, parents, bind):
+    """Skinning transforms of every joint from those of the handle columns (f, J, 3, 4).
+
+    A joint that drives no column (an end joint) follows its parent rigidly.
+    """
+    f, J = T_columns.shape[0], len(parents)
+    out = np.full((f, J, 4, 4), np.nan)
+    out[:, column_joint] = homogeneous(T_columns)
+    for j in range(J):  # end joints come after their parents in skeleton_rig's order
+        if np.isnan(out[0, j, 0, 0]):
+            p = parents[j]
+            out[:, j] = out[:, p] if p >= 0 else np.eye(4)
+    return out[..., :3, :]
+
+
+def sample(interp: str, times, values, t):
+    """glTF animation sampler at times ``t``: STEP, LINEAR (slerp for unit quaternions) or
+    CUBICSPLINE (``values`` holds in-tangent, value, out-tangent per key)."""
+    times = np.asarray(times, dtype=np.float64)
+    quat = values.shape[-1] == 4
+    if interp == "CUBICSPLINE":
+        values = values.reshape(len(times), 3, -1)
+    i = np.clip(np.searchsorted(times, t, side="right") - 1, 0, len(times) - 1)
+    i1 = np.minimum(i + 1, len(times) - 1)
+    dt = np.where(i1 > i, times[i1] - times[i], 1.0)
+    u = np.clip((t - times[i]) / dt, 0.0, 1.0)[:, None]
+    if interp == "STEP":
+        return values[i] if values.ndim == 2 else values[i, 1]
+    if interp == "CUBICSPLINE":
+        p0, m0 = values[i, 1], values[i, 2] * dt[:, None]
+        p1, m1 = values[i1, 1], values[i1, 0] * dt[:, None]
+        u2, u3 = u * u, u * u * u
+        v = (2 * u3 - 3 * u2 + 1) * p0 + (u3 - 2 * u2 + u) * m0
+        v += (-2 * u3 + 3 * u2) * p1 + (u3 - u2) * m1
+        return v / np.linalg.norm(v, axis=1, keepdims=True) if quat else v
+    if quat:
+        q0, q1 = values[i], values[i1].copy()
+        q1[np.sum(q0 * q1, axis=1) < 0] *= -1
+        out = np.empty_like(q0)
+        for r in range(len(t)):
+            key = Rotation.from_quat(np.stack([q0[r], q1[r]]))
+            out[r] = _slerp(key, float(u[r, 0]))
+        return out
+    return (1 - u) * values[i] + u * values[i1]
+
+
+def _slerp(key: Rotation, u: float) -> np.ndarray:
+    rel = key[0].inv() * key[1]
+    return (key[0] * Rotation.from_rotvec(rel.as_rotvec() * u)).as_quat()

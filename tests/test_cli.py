@@ -1,0 +1,200 @@
+"""The ``skinrs`` command line, run as users run it: in a subprocess, checking exit codes and files."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import skinrs
+from skinrs.gltf import read_gltf
+
+ROOT = Path(__file__).resolve().parents[1]
+ARM = ROOT / "tests" / "data" / "arm"
+COMMANDS = ("weights", "reduce", "pose", "info")
+
+
+def skinrs_cli(*args, cwd=None, timeout=300):
+    return subprocess.run(
+        [sys.executable, "-m", "skinrs", *map(str, args)],
+        check=False,
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        timeout=timeout,
+    )
+
+
+def assert_one_line_error(run, *words):
+    assert run.returncode == 2, run.stderr
+    lines = run.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in run.stderr, run.stderr
+    for w in words:
+        assert w in lines[0], lines[0]
+
+
+@pytest.fixture(scope="module")
+def arm_glb(tmp_path_factory):
+    """``skinrs weights arm.obj arm.tgf -o arm.glb`` (the README's example), run once."""
+    out = tmp_path_factory.mktemp("cli") / "arm.glb"
+    t0 = time.perf_counter()
+    run = skinrs_cli("weights", ARM / "arm.obj", ARM / "arm.tgf", "-o", out)
+    print(f"skinrs weights arm.obj arm.tgf -o arm.glb: {time.perf_counter() - t0:.1f} s")
+    assert run.returncode == 0, run.stderr
+    return out
+
+
+@pytest.fixture(scope="module")
+def capsule(tmp_path_factory):
+    """A small closed capsule along x (.off, .ply, .stl) and a 2-bone .tgf inside it."""
+    import trimesh
+
+    d = tmp_path_factory.mktemp("capsule")
+    mesh = trimesh.creation.capsule(height=1.6, radius=0.3, count=[24, 24])
+    mesh.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, [0, 1, 0]))
+    for ext in ("off", "ply", "stl"):
+        mesh.export(d / f"capsule.{ext}")
+    skinrs.io.write_tgf(d / "capsule.tgf", [[-0.7, 0, 0], [0, 0, 0], [0.7, 0, 0]], [[0, 1], [1, 2]])
+    return d, np.asarray(mesh.vertices)
+
+
+def test_help_on_every_command():
+    for args in ([], *([c] for c in COMMANDS)):
+        run = skinrs_cli(*args, "--help")
+        assert run.returncode == 0 and "usage: skinrs" in run.stdout, run.stderr
+    script = Path(sys.executable).parent / "skinrs"  # the console script of pyproject.toml
+    run = subprocess.run([script, "--help"], check=False, capture_output=True, text=True)
+    assert run.returncode == 0 and all(c in run.stdout for c in COMMANDS)
+
+
+def test_weights_of_the_arm_as_a_glb(arm_glb):
+    a = read_gltf(arm_glb)
+    V, F = skinrs.io.read_obj(ARM / "arm.obj")
+    C, BE = skinrs.io.read_tgf(ARM / "arm.tgf")
+    assert np.abs(a["V"] - V).max() <= 1e-6 and (a["F"] == F).all()
+    np.testing.assert_array_equal(a["BE"], BE)
+    W = a["W"]
+    assert W.min() >= 0 and np.abs(W.sum(1) - 1).max() <= 1e-6
+    # the vertices closest to a bone's middle follow that bone
+    for b, (h, t) in enumerate(BE):
+        near = np.argsort(np.linalg.norm(V - (C[h] + C[t]) / 2, axis=1))[:20]
+        assert (W[near].argmax(1) == b).all()
+
+
+def test_weights_from_other_formats_and_to_weight_files(capsule, tmp_path):
+    d, V = capsule
+    outs = {}
+    for ext, out in (("off", "w.dmat"), ("ply", "w.csv"), ("stl", "w.npz")):
+        run = skinrs_cli("weights", d / f"capsule.{ext}", d / "capsule.tgf", "-o", tmp_path / out)
+        assert run.returncode == 0, run.stderr
+        outs[ext] = tmp_path / out
+    with np.load(outs["stl"]) as z:  # STL corners are merged: rows of the merged mesh
+        Ws = z["W"]
+    # (PLY and STL hold float32 coordinates: TetGen meshes the inside a little differently)
+    for W in (skinrs.io.read_dmat(outs["off"]), np.loadtxt(outs["ply"], delimiter=",")):
+        assert W.shape == (len(V), 2) and np.abs(W.sum(1) - 1).max() <= 1e-9
+        assert W[V[:, 0] < -0.8, 0].min() > 0.6 and W[V[:, 0] > 0.8, 1].min() > 0.6
+    assert Ws.shape == (len(V), 2) and np.abs(Ws.sum(1) - 1).max() <= 1e-9
+
+
+def test_weights_with_k_influences_and_the_field_method(capsule, tmp_path):
+    d, V = capsule
+    run = skinrs_cli(
+        "weights", d / "capsule.off", d / "capsule.tgf", "-k", "1", "--reduce-method",
+        "k-largest", "-o", tmp_path / "w.npz",
+    )  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    with np.load(tmp_path / "w.npz") as z:
+        assert z["indices"].shape == (len(V), 1) and ((z["W"] > 0).sum(1) == 1).all()
+    run = skinrs_cli(
+        "weights", d / "capsule.off", d / "capsule.tgf", "--method", "field", "--steps", "12",
+        "-o", tmp_path / "f.dmat",
+    )  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    W = skinrs.io.read_dmat(tmp_path / "f.dmat")
+    assert W.shape == (len(V), 2) and np.abs(W.sum(1) - 1).max() <= 1e-9
+    assert W.min() >= 0  # (12 steps: plumbing only; tests/test_field.py checks the weights)
+
+
+def test_reduce(capsule, tmp_path):
+    d, V = capsule
+    W = np.random.default_rng(0).random((len(V), 2))
+    skinrs.io.write_dmat(tmp_path / "w.dmat", W / W.sum(1, keepdims=True))
+    out = tmp_path / "r.dmat"
+    run = skinrs_cli("reduce", tmp_path / "w.dmat", "-k", "1", "--method", "k-largest", "-o", out)
+    assert run.returncode == 0, run.stderr
+    R = skinrs.io.read_dmat(out)
+    np.testing.assert_array_equal(R.argmax(1), W.argmax(1))
+    assert ((R > 0).sum(1) == 1).all()
+    run = skinrs_cli(
+        "reduce", tmp_path / "w.dmat", "-k", "1", "--mesh", d / "capsule.off",
+        "--skeleton", d / "capsule.tgf", "-o", tmp_path / "p.npz",
+    )  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    with np.load(tmp_path / "p.npz") as z:
+        assert z["indices"].shape == (len(V), 1)
+    run = skinrs_cli("reduce", tmp_path / "w.dmat", "-k", "1", "-o", out)
+    assert_one_line_error(run, "--method poisson needs --mesh and --skeleton")
+
+
+def test_pose_writes_a_picture(arm_glb, tmp_path):
+    for pose, extra in (("random:1", []), ("random:2", ["--dqs"])):
+        out = tmp_path / f"{pose.replace(':', '')}.png"
+        run = skinrs_cli("pose", arm_glb, "--pose", pose, *extra, "-o", out)
+        assert run.returncode == 0, run.stderr
+        assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    run = skinrs_cli("pose", arm_glb, "--pose", "frame:0", "-o", tmp_path / "f.png")
+    assert_one_line_error(run, "has no animation")
+    run = skinrs_cli("pose", ARM / "arm.obj", "-o", tmp_path / "f.png")
+    assert_one_line_error(run, "not a skinned glTF asset")
+
+
+def test_info(arm_glb):
+    run = skinrs_cli("info", ARM / "arm.obj", ARM / "arm.tgf", "--json")
+    assert run.returncode == 0, run.stderr
+    info = json.loads(run.stdout)
+    assert info["vertices"] == 8311 and info["faces"] == 16618 and info["watertight"]
+    assert info["joints"] == 5 and info["bones"] == 4 and info["joints_outside"] == []
+    run = skinrs_cli("info", arm_glb)
+    assert run.returncode == 0 and "bones: 4" in run.stdout and "bone3_end" in run.stdout
+
+
+def test_bad_files_and_arguments(tmp_path):
+    (tmp_path / "bad.glb").write_bytes(b"garbage")
+    (tmp_path / "bad.obj").write_text("v 0 0 0\nf 1 2 3\n")
+    cases = [
+        (("weights", tmp_path / "missing.obj", ARM / "arm.tgf", "-o", tmp_path / "o.glb"), "no such file"),
+        (("weights", ARM / "arm.obj", ARM / "arm.tgf", "-o", tmp_path / "o.xyz"), "unknown output format"),
+        (("weights", ARM / "arm.obj", "-o", tmp_path / "o.glb"), "no skeleton"),
+        (("weights", ARM / "arm.obj", ARM / "arm.obj", "-o", tmp_path / "o.glb"), "unknown skeleton format"),
+        (("weights", tmp_path / "bad.obj", ARM / "arm.tgf", "-o", tmp_path / "o.glb"), "out of range"),
+        (("info", tmp_path / "bad.glb"), "not a readable glTF"),
+        (("info", ARM / "arm.tgf"), "unknown mesh format"),
+    ]  # fmt: skip
+    for args, words in cases:
+        assert_one_line_error(skinrs_cli(*args), words)
+    assert not list(tmp_path.glob("o.*")) and not list(tmp_path.glob(".skinrs-*"))
+    run = skinrs_cli("weights", ARM / "arm.obj", "--method", "nope", "-o", tmp_path / "o.glb")
+    assert run.returncode == 2 and "invalid choice" in run.stderr
+    run = skinrs_cli("--debug", "info", tmp_path / "bad.glb")
+    assert run.returncode != 0 and "Traceback" in run.stderr
+
+
+def test_ctrl_c_exits_130_and_writes_nothing(tmp_path):
+    out = tmp_path / "arm.glb"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "skinrs", "weights", ARM / "arm.obj", ARM / "arm.tgf", "-o", out],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    time.sleep(4)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert "interrupted" in err and "Traceback" not in err
+    assert os.listdir(tmp_path) == []
