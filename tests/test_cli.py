@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import skinrs
-from skinrs.gltf import read_gltf
+from skinrs.io import read_gltf
 
 ROOT = Path(__file__).resolve().parents[1]
 ARM = ROOT / "tests" / "data" / "arm"

@@ -12,7 +12,7 @@ import pytest
 import skinrs
 from scipy.spatial import cKDTree
 from skinrs import gltf_rig
-from skinrs.gltf import read_gltf, write_gltf
+from skinrs.io import read_gltf, write_gltf
 
 ROOT = Path(__file__).resolve().parents[1]
 ARM = ROOT / "tests" / "data" / "arm"

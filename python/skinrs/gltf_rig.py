@@ -16,9 +16,14 @@ Matrices here are 4x4 world matrices (float64); a rig is described by
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from .skinning import bone_parents
+
+
+def _rotation():
+    from scipy.spatial.transform import Rotation  # imported on use: ~0.2 s
+
+    return Rotation
 
 
 def homogeneous(T) -> np.ndarray:
@@ -37,7 +42,7 @@ def y_to(d: np.ndarray) -> np.ndarray:
     s, c = np.linalg.norm(axis), float(y @ d)
     if s < 1e-12:
         return np.eye(3) if c > 0 else np.diag([1.0, -1.0, -1.0])  # half turn about X
-    return Rotation.from_rotvec(axis / s * np.arctan2(s, c)).as_matrix()
+    return _rotation().from_rotvec(axis / s * np.arctan2(s, c)).as_matrix()
 
 
 def skeleton_rig(C, BE, P, names):
@@ -121,7 +126,7 @@ def decompose(M: np.ndarray, what: str):
     R = A / s
     if np.abs(R.T @ R - np.eye(3)).max() > 1e-5:
         raise ValueError(f"{what} has a shear, which a glTF node cannot hold")
-    return M[:3, 3].copy(), Rotation.from_matrix(R).as_quat(), s
+    return M[:3, 3].copy(), _rotation().from_matrix(R).as_quat(), s
 
 
 def local_matrices(parents, world):
@@ -189,12 +194,12 @@ def sample(interp: str, times, values, t):
         q1[np.sum(q0 * q1, axis=1) < 0] *= -1
         out = np.empty_like(q0)
         for r in range(len(t)):
-            key = Rotation.from_quat(np.stack([q0[r], q1[r]]))
+            key = _rotation().from_quat(np.stack([q0[r], q1[r]]))
             out[r] = _slerp(key, float(u[r, 0]))
         return out
     return (1 - u) * values[i] + u * values[i1]
 
 
-def _slerp(key: Rotation, u: float) -> np.ndarray:
+def _slerp(key, u: float) -> np.ndarray:
     rel = key[0].inv() * key[1]
-    return (key[0] * Rotation.from_rotvec(rel.as_rotvec() * u)).as_quat()
+    return (key[0] * _rotation().from_rotvec(rel.as_rotvec() * u)).as_quat()

@@ -18,6 +18,7 @@ count that does not match the data, or an unknown keyword is an error.
 ((7234, 3), (29998, 4), (9556, 3), (21, 3), (20, 2))
 """
 
+from ..gltf import read_gltf, write_gltf
 from .dmat import read_dmat, write_dmat
 from .medit import read_mesh, write_mesh
 from .obj import read_obj, write_obj
@@ -27,12 +28,14 @@ from .tgf import read_tgf, write_tgf
 
 __all__ = [
     "read_dmat",
+    "read_gltf",
     "read_mesh",
     "read_obj",
     "read_polygon_dat",
     "read_rignet_rig",
     "read_tgf",
     "write_dmat",
+    "write_gltf",
     "write_mesh",
     "write_obj",
     "write_tgf",
