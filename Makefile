@@ -6,8 +6,6 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 BLENDER_VENV ?= .venv-blender
 export SKINRS_BLENDER_PYTHON := $(abspath $(BLENDER_VENV))/bin/python
-DATA   ?= $(abspath ../shared/data)
-export SKINRS_DATA := $(DATA)
 
 .PHONY: venv build demo test pytest lint bench clean
 

@@ -16,7 +16,9 @@ vertices), so ``boundary_conditions`` finds a non-empty constraint set for every
 the distance tolerance is relative to the bounding-box diagonal).
 
 The 2D cases are meshed with the ``triangle`` package (deterministic for a given input and flags);
-the 3D cases are read from the shared data directory (env ``SKINRS_DATA``).
+the 3D cases are read from ``tests/data``; woody and big2d re-mesh the woody-2d outline of the
+shared data set, which cannot be redistributed (env ``SKINRS_DATA``; only
+``tests/reference/make_qp_reference.py`` rebuilds them, the tests read the stored fixtures).
 
 Example
 -------
@@ -40,9 +42,9 @@ BC_EPS = 1e-7
 
 
 def data_root() -> Path:
-    """Shared data directory: env ``SKINRS_DATA`` or ``../shared/data`` next to the repo."""
+    """``tests/data``, or the shared data set named by env ``SKINRS_DATA`` if set."""
     env = os.environ.get("SKINRS_DATA")
-    return Path(env) if env else ROOT.parent / "shared" / "data"
+    return Path(env) if env else ROOT / "tests" / "data"
 
 
 # --------------------------------------------------------------------------------------------

@@ -1,21 +1,13 @@
-"""Shared test fixtures: where the shared data lives."""
+"""Shared test fixtures: the test data committed under tests/data (see its README)."""
 
-import os
 from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
-
-
-def data_root() -> Path:
-    env = os.environ.get("SKINRS_DATA")
-    return Path(env) if env else ROOT.parent / "shared" / "data"
+DATA = Path(__file__).resolve().parent / "data"
 
 
 @pytest.fixture(scope="session")
 def data_dir() -> Path:
-    d = data_root()
-    if not d.is_dir():
-        pytest.fail(f"shared test data not found at {d}; set SKINRS_DATA")
-    return d
+    """``tests/data``: small third-party files, each case in its own folder."""
+    return DATA

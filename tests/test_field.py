@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import skinrs
+from _generated import box_figure_soup, fan_triangles, write_rignet_rig, write_soup_obj
 from skinrs import io
 from skinrs.field import _boundary_edges_2d
 
@@ -212,9 +213,12 @@ def _check_field(fld, W, handle_points):
     np.testing.assert_array_equal(fld.evaluate(handle_points), np.eye(len(handle_points)))
 
 
-def test_rignet_smith_polygon_soup(data_dir):
-    V, F = io.read_obj(data_dir / "rignet-smith" / "smith_ori.obj")
-    rig = io.read_rignet_rig(data_dir / "rignet-smith" / "smith_ori_rig.txt")
+def test_rignet_style_polygon_soup(tmp_path):
+    """A generated soup (every face its own vertices, overlapping boxes, an open box) with a
+    RigNet-format rig that has coincident joints."""
+    V0, polys = box_figure_soup()
+    V, F = io.read_obj(write_soup_obj(tmp_path / "figure.obj", V0, polys))
+    rig = io.read_rignet_rig(write_rignet_rig(tmp_path / "figure_rig.txt", V))
     C, BE = rig["C"], rig["BE"]
     fld = skinrs.GeometricField(V, F, C, BE=BE, **ROBUST)
     fld.optimize()
@@ -248,9 +252,13 @@ def _lonely_bone_points(C, BE, eps):
     return np.array(Q), np.array(cols)
 
 
-@pytest.mark.parametrize("case", ["truck-soup/truck.obj", "plane/plane_holes.obj"])
+@pytest.mark.parametrize("case", ["soup", "plane/plane_holes.obj"])
 def test_soup_and_open_mesh_with_point_handles(data_dir, case):
-    V, F = io.read_obj(data_dir / case)
+    if case == "soup":
+        V, polys = box_figure_soup()
+        F = fan_triangles(polys)
+    else:
+        V, F = io.read_obj(data_dir / case)
     H = _inside_handles(V, F, 3, np.random.default_rng(0))
     fld = skinrs.GeometricField(V, F, H, P=[0, 1, 2], **ROBUST)
     fld.optimize()

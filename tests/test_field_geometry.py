@@ -12,18 +12,21 @@ import igl  # libigl is a test dependency (Makefile); a missing one must fail, n
 import numpy as np
 import pytest
 import skinrs
+from _generated import box_figure_soup, fan_triangles
 from skinrs import io
 
 MESHES = {
     "closed": "arm/arm.obj",
     "open": "plane/plane_holes.obj",
-    "soup": "truck-soup/truck.obj",
+    "soup": None,  # generated: overlapping boxes, every face its own vertices, one box open
 }
 
 
 def _load(data_dir, key):
-    V, F = io.read_obj(data_dir / MESHES[key])
-    return V, F
+    if MESHES[key] is None:
+        V, polys = box_figure_soup()
+        return V, fan_triangles(polys)
+    return io.read_obj(data_dir / MESHES[key])
 
 
 def _box_points(V, n, rng, inflate=0.2):
@@ -142,6 +145,12 @@ def _tri_dist2(x, V, F):
 # --- winding numbers -------------------------------------------------------------------------
 
 
+# Max |w - exact| at beta = 3, at beta = 2, and the median at beta = 2. The soup's boxes have
+# large faces meeting at corners, where the far-field expansion errs most (libigl's
+# fast_winding_number errs as much there: 9e-3 at beta = 2).
+TOL_WINDING = {"closed": (1e-3, 5e-3, 5e-4), "open": (1e-3, 5e-3, 5e-4), "soup": (2e-3, 1e-2, 1e-3)}
+
+
 @pytest.mark.parametrize("key", ["closed", "open", "soup"])
 def test_winding_number_matches_igl(data_dir, key):
     V, F = _load(data_dir, key)
@@ -152,13 +161,14 @@ def test_winding_number_matches_igl(data_dir, key):
     w = skinrs.winding_number(V, F, Q, beta=3.0)
     assert w.shape == (2000,)
     err = np.abs(w - w_ref)
-    assert err.max() < 1e-3, f"{key}: beta=3 max |w - igl| = {err.max():.2e}"
+    tol3, tol2, median2 = TOL_WINDING[key]
+    assert err.max() < tol3, f"{key}: beta=3 max |w - igl| = {err.max():.2e}"
     # beta = 2 (the default, Barill et al.'s): the truncation error near the surface reaches a
     # few 1e-3, as for libigl's own implementation of the same method on the same points.
     w2 = skinrs.winding_number(V, F, Q)
     err2 = np.abs(w2 - w_ref)
     err_igl = np.abs(igl.fast_winding_number(V, F, Q) - w_ref)
-    assert err2.max() < 5e-3 and np.median(err2) < 5e-4, f"{key}: beta=2 {err2.max():.2e}"
+    assert err2.max() < tol2 and np.median(err2) < median2, f"{key}: beta=2 {err2.max():.2e}"
     assert err2.max() < 1.6 * err_igl.max()
     if key == "closed":
         # A closed mesh: the values are (numerically) 0 or 1 away from the surface.

@@ -4,6 +4,7 @@ geometrically in the volume mesh; weights are checked for the BBW properties."""
 
 import itertools
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -132,9 +133,10 @@ def test_2d_outline_bones_are_vertices_and_segments():
     assert abs(area - 7.0) < 1e-12
 
 
-def test_2d_triangle_mesh_keeps_its_vertices(data_dir):
-    V, F = read_obj(data_dir / "woody-2d" / "woody.obj")  # z = 0 column
-    C, BE = read_tgf(data_dir / "woody-2d" / "woody.tgf")
+def test_2d_triangle_mesh_keeps_its_vertices():
+    z = np.load(Path(__file__).resolve().parent / "reference" / "bar.npz")  # made by `triangle`
+    V, F = np.c_[z["V"], np.zeros(len(z["V"]))], z["T"]  # a z = 0 column, as in 2D OBJ files
+    C, BE = np.c_[z["C"], np.zeros(len(z["C"]))], z["BE"]
     Vv, T, b, bc = skinrs.mesh_with_skeleton(V, F, C, BE)
     assert Vv.shape[1] == 3 and np.array_equal(Vv[: len(V)], V)
     S = expected_samples(C[:, :2], BE, mean_edge_length(V[:, :2], F))

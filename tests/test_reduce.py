@@ -77,11 +77,11 @@ def arm(data_dir):
 
 @pytest.fixture(scope="module")
 def hand(data_dir):
-    """Boundary surface of hand.mesh with hand.dmat BBW weights, explicitly prepared: the file's
-    weights are not normalised (row sums 0.957-1.565, min -0.0052), so they are clipped to >= 0
-    and rows renormalised here (the library itself never clamps)."""
+    """Boundary surface of hand.mesh with the exact BBW weights of the QP reference fixture
+    (tests/reference/hand.npz, made without skinrs), clipped to >= 0 (they are >= -1e-12) and
+    rows renormalised here (the library itself never clamps)."""
     V, _, F = igl.readMESH(str(data_dir / "hand-403" / "hand.mesh"))
-    W = igl.readDMAT(str(data_dir / "hand-403" / "hand.dmat"))
+    W = np.load(Path(__file__).resolve().parent / "reference" / "hand.npz")["W_qp"]
     used = np.unique(F)
     remap = -np.ones(len(V), dtype=np.int64)
     remap[used] = np.arange(len(used))

@@ -161,7 +161,11 @@ def test_knight_nopou_oracle():
     info = json.loads(fx["info_json"])
     W_matlab = fx["W_nopou_matlab"]
     W_file = cases.read_dmat(
-        cases.data_root() / "decimated-knight" / "decimated-knight-matlab-active-set.dmat"
+        cases.ROOT
+        / "tests"
+        / "data"
+        / "decimated-knight"
+        / "decimated-knight-matlab-active-set.dmat"
     )
     np.testing.assert_array_equal(W_matlab, W_file)
     assert W_matlab.shape == (len(fx["V"]), 7)

@@ -12,3 +12,10 @@ def hand():
     V, T, F = io.read_mesh(HERE / "hand" / "hand.mesh")
     C, BE = io.read_tgf(HERE / "hand" / "hand.tgf")
     return V, T, F, C, BE
+
+
+def box_figure(n: int = 3):
+    """A generated polygon soup with a skeleton; see :mod:`skinrs.data.figure`."""
+    from .figure import box_figure as make
+
+    return make(n)
