@@ -11,3 +11,9 @@ DATA = Path(__file__).resolve().parent / "data"
 def data_dir() -> Path:
     """``tests/data``: small third-party files, each case in its own folder."""
     return DATA
+
+
+def pytest_configure(config):
+    config.addinivalue_line(
+        "markers", "slow: takes 10 s or more; CI runs it, `make quicktest` leaves it out"
+    )

@@ -19,11 +19,18 @@ from skinrs.field import _boundary_edges_2d
 REF = __import__("pathlib").Path(__file__).resolve().parent / "reference"
 
 
-def _stats(name, W, Wref):
+def _assert_close_weights(W, Wref, mean, p95):
+    """Mean and 95th percentile of |W - Wref| below the given bounds."""
     D = np.abs(W - Wref)
-    mean, p95, mx = D.mean(), np.percentile(D, 95), D.max()
-    print(f"{name}: mean |dw| {mean:.4f}, 95th pct {p95:.4f}, max {mx:.4f}")
-    return mean
+    assert D.mean() <= mean, f"mean |dw| {D.mean():.4f}"
+    assert np.percentile(D, 95) <= p95, f"95th percentile |dw| {np.percentile(D, 95):.4f}"
+
+
+def _assert_mostly_direct(status, fraction):
+    """At least ``fraction`` of the vertices are evaluated directly (status 0), not by the
+    fall-backs (1 without visibility, 2 nearest point, 3 flood fill)."""
+    assert set(np.unique(status)) <= {0, 1, 2, 3}
+    assert np.mean(status == 0) >= fraction, np.bincount(status)
 
 
 def _check_rows(W):
@@ -150,7 +157,6 @@ def test_no_bleeding_across_a_narrow_gap(u_field):
     fld_e.optimize()
     We = fld_e.vertex_weights()
     plain = max(We[right, 0].max(), We[left, 1].max())
-    print(f"weight of a bone on the other arm: k_RT {vis:.2e}, plain Gaussian {plain:.3f}")
     assert vis < 0.05
     assert plain > 0.05
 
@@ -158,6 +164,7 @@ def test_no_bleeding_across_a_narrow_gap(u_field):
 # --- agreement with FEM -----------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_woody_matches_fem():
     """woody-2d, schedule 600 steps, 2^10 -> 2^12 points, M = 2^11 (paper: 6000, 2^11 -> 2^14,
     2^12)."""
@@ -171,9 +178,10 @@ def test_woody_matches_fem():
     fld.optimize()
     W = fld.vertex_weights()
     _check_rows(W)
-    assert _stats("woody-2d surface vs bbw_dual", W[surf], Wfem[surf]) <= 0.03
+    _assert_close_weights(W[surf], Wfem[surf], mean=0.03, p95=0.15)
 
 
+@pytest.mark.slow
 def test_hand_surface_matches_fem(data_dir):
     """hand-403, schedule 150 steps, 2^10 -> 2^11 points, M = 2^10, interior sampled from the
     tet mesh (paper: 6000 steps, 2^13 -> 2^16, 2^11)."""
@@ -188,7 +196,7 @@ def test_hand_surface_matches_fem(data_dir):
     fld.optimize()
     W = fld.vertex_weights()
     _check_rows(W)
-    assert _stats("hand-403 surface vs bbw_dual", W[surf], Wfem[surf]) <= 0.03
+    _assert_close_weights(W[surf], Wfem[surf], mean=0.03, p95=0.15)
 
 
 # --- robustness -------------------------------------------------------------------------------
@@ -223,13 +231,12 @@ def test_rignet_style_polygon_soup(tmp_path):
     fld = skinrs.GeometricField(V, F, C, BE=BE, **ROBUST)
     fld.optimize()
     W, status = fld.vertex_weights(return_status=True)
-    print("smith vertex status counts (direct, no-vis, nearest, flood):", np.bincount(status))
+    _assert_mostly_direct(status, 0.9)
     _check_rows(W)
     # One-hot on every bone point farther than the mollifier radius from all other bones
     # (RigNet's bones share joints and overlap near the hips).
     eps = 0.5 * fld.info()["sigma"]
     Q, cols = _lonely_bone_points(C, BE, eps)
-    print(f"smith: {len(set(cols))} of {len(BE)} bones have points away from the others")
     assert len(set(cols)) >= len(BE) // 2
     np.testing.assert_array_equal(fld.evaluate(Q), np.eye(len(BE))[cols])
 
@@ -263,7 +270,7 @@ def test_soup_and_open_mesh_with_point_handles(data_dir, case):
     fld = skinrs.GeometricField(V, F, H, P=[0, 1, 2], **ROBUST)
     fld.optimize()
     W, status = fld.vertex_weights(return_status=True)
-    print(case, "vertex status counts (direct, no-vis, nearest, flood):", np.bincount(status))
+    _assert_mostly_direct(status, 0.9)
     _check_field(fld, W, H)
 
 
@@ -284,13 +291,11 @@ def test_degraded_arm_close_to_clean_arm(data_dir):
     fld = skinrs.GeometricField(Vd, Fd, C, BE=BE, **opts)
     fld.optimize()
     Wd, status = fld.vertex_weights(return_status=True)
-    print(
-        "degraded arm vertex status counts (direct, no-vis, nearest, flood):", np.bincount(status)
-    )
     _check_rows(Wc)
     _check_rows(Wd)
     used = np.unique(Fd)
-    assert _stats("degraded arm vs clean arm", Wd[used], Wc[used]) <= 0.1
+    _assert_mostly_direct(status[used], 0.8)  # jittered out of the shape: flood-filled
+    _assert_close_weights(Wd[used], Wc[used], mean=0.1, p95=0.1)
 
 
 # --- bad input --------------------------------------------------------------------------------

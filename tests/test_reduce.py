@@ -390,7 +390,6 @@ def test_converged_poisson_matches_direct_sparse_solve(tube_rig, energy, solver)
     )
     a_ref, objective = direct_reduction(V, F, W, I, T, energy)
     f, f_ref = objective(A), objective(a_ref)
-    print(f"\n{energy}/{solver}: sweeps {info.sweeps}, objective {f:.10e} vs direct {f_ref:.10e}")
     assert abs(info.objective[-1] - f) <= 1e-9 * f  # the reported objective is the real one
     assert f_ref <= f <= f_ref * (1 + 1e-6)
 
@@ -400,9 +399,9 @@ def test_converged_poisson_matches_direct_sparse_solve(tube_rig, energy, solver)
 
 @pytest.mark.parametrize("rig,k", [("hand", 4), ("arm", 2)])
 def test_real_rig_heldout_poses_follow_paper_ordering(request, rig, k):
-    """Fig. 10 ordering on held-out poses: Poisson has the smallest normal deviation, geometric a
-    smaller position error than k-largest. hand-403 with its (prepared) BBW weights reduces
-    20 -> 4; the libigl arm has 4 bones, so 4 -> 2 is its real reduction. 7 fitting poses
+    """Fig. 10 ordering on held-out poses: Poisson has the smallest normal deviation (or within
+    5 % of it), Poisson and geometric smaller ones than k-largest, geometric a smaller position
+    error than k-largest. hand-403 with its exact BBW weights reduces 20 -> 4; the libigl arm has 4 bones, so 4 -> 2 is its real reduction. 7 fitting poses
     (the paper uses 3-8), 8 different held-out poses from the same generator."""
     V, F, W, C, BE = request.getfixturevalue(rig)
     fit = bone_poses(C, BE, 7, seed=1)
@@ -412,10 +411,9 @@ def test_real_rig_heldout_poses_follow_paper_ordering(request, rig, k):
         I, A = skinrs.reduce_weights(W, k, method, V=V, F=F, bone_transforms=fit)
         check_constraints(W, I, A, k, nonneg=True)
         err[method] = skinrs.reduction_error(V, F, W, (I, A), bone_transforms=held_out)
-    print(f"\n{rig} {W.shape[1]} -> {k}, held-out RMS normal deviation (rad) / position (% diag):")
-    for m, e in err.items():
-        print(f"  {m:10s} {e.normal_rms_all:.5f} / {e.position_rms_all:.5f}")
-    assert err["poisson"].normal_rms_all < err["k-largest"].normal_rms_all
+    normal = {m: e.normal_rms_all for m, e in err.items()}
+    assert normal["poisson"] < normal["k-largest"] and normal["geometric"] < normal["k-largest"]
+    assert normal["poisson"] <= 1.05 * min(normal.values())  # best or within 5 % of the best
     assert err["geometric"].position_rms_all < err["k-largest"].position_rms_all
 
 
@@ -468,11 +466,7 @@ def test_normal_transform_approximates_recomputed_normals(hand):
     def rms(a):
         return np.sqrt((a**2).mean())
 
-    print(
-        f"\nhand: transformed vs recomputed normals RMS {rms(ang):.4f} rad (median "
-        f"{np.median(ang):.4f}, 90% {np.percentile(ang, 90):.4f}); rest normals left alone: "
-        f"RMS {rms(still):.4f} (median {np.median(still):.4f}, 90% {np.percentile(still, 90):.4f})"
-    )
+    assert rms(ang) < 0.6 * rms(still)
     q_ang, q_still = np.percentile(ang, [50, 90]), np.percentile(still, [50, 90])
     assert np.all(q_ang < [0.1, 0.6] * q_still)
 
