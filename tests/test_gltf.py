@@ -156,6 +156,13 @@ def test_round_trip_keeps_mesh_skeleton_weights_and_animation(arm, tmp_path):
     np.testing.assert_allclose(anim["times"], [0, 1 / 24])
     assert np.abs(anim["T"] - poses).max() <= 1e-5
     assert a["joints"]["names"][len(BE) :] == ["j3_end", "j4_end", "j5_end"]
+    # any numbering of the joints comes back (kept in the nodes' extras)
+    perm = np.random.default_rng(0).permutation(len(C))
+    C2, BE2 = C[perm], np.argsort(perm)[BE]
+    write_gltf(tmp_path / "perm.glb", V, F, packed, C2, BE2)
+    b = read_gltf(tmp_path / "perm.glb")
+    np.testing.assert_array_equal(b["BE"], BE2)
+    assert np.abs(b["C"] - C2).max() <= 1e-6 * scale
 
 
 def test_more_than_k_columns_are_reduced_with_poisson_by_default(arm, tmp_path):

@@ -183,6 +183,7 @@ def write_gltf(
         j = asset["joints"]
         C, BE, P = asset["C"], asset["BE"], asset["P"]
         jnames, parents, bind, column_joint = j["names"], j["parents"], j["bind"], j["column"]
+        labels = j["labels"]
         animations = j["animations"] if poses is None else []
     else:
         if C is None or BE is None:
@@ -198,7 +199,7 @@ def write_gltf(
                 f"names must have one entry per column ({len(default)}), got {len(names)}"
             )
         cols = default if names is None else [str(x) for x in names]
-        jnames, parents, bind, column_joint = rig.skeleton_rig(C, BE, P, cols)
+        jnames, parents, bind, column_joint, labels = rig.skeleton_rig(C, BE, P, cols)
         animations = []
     m = len(column_joint)
     if names is not None and asset is not None:
@@ -250,6 +251,8 @@ def write_gltf(
     for j in range(len(parents)):
         tr, q, s = rig.decompose(local[j], f"the bind matrix of joint {jnames[j]!r}")
         node = lib.Node(name=str(jnames[j]), translation=tr.tolist(), rotation=q.tolist())
+        if labels[j] is not None:  # the joint of C it stands for: keeps C's numbering
+            node.extras = {"skinrs_joint": int(labels[j])}
         if np.abs(s - 1).max() > 1e-9:
             node.scale = s.tolist()
         node.children = [J0 + int(c) for c in np.flatnonzero(parents == j)] or None

@@ -108,6 +108,12 @@ def _compose(t, q, s) -> np.ndarray:
     return M
 
 
+def _label(node):
+    """The skinrs joint index :func:`skinrs.io.write_gltf` stored on a joint node, or None."""
+    x = (node.extras or {}).get("skinrs_joint") if isinstance(node.extras, dict) else None
+    return x if isinstance(x, int) and not isinstance(x, bool) and x >= 0 else None
+
+
 def _skinned_node(f: _File) -> int:
     nodes = f.g.nodes
     skinned = [i for i, n in enumerate(nodes) if n.mesh is not None and n.skin is not None]
@@ -240,7 +246,8 @@ def read_gltf(path, *, weld=True):
         (frames, p + m, 3, 4) transforms per column (``skinrs.lbs(V, W, T[i])`` poses frame i);
         ``joints``: the joint nodes themselves, ``names``, ``parents`` (-1 for a root),
         ``bind`` (J, 4, 4) world bind matrices, ``weights`` (n, J), ``column`` (p + m,) joint
-        of each column, ``animations`` (``T`` per joint), for :func:`skinrs.io.write_gltf`.
+        of each column, ``labels`` (joint of ``C`` per node, from skinrs' node extras, else
+        None), ``animations`` (``T`` per joint), for :func:`skinrs.io.write_gltf`.
         Without a skin, the skeleton entries are empty and ``V`` is in world coordinates.
 
     Examples
@@ -290,7 +297,8 @@ def read_gltf(path, *, weld=True):
         parents[j] = where.get(int(a), -1)
     bind = np.linalg.inv(ibm) if nJ else ibm
     scale = np.linalg.norm(np.ptp(V, axis=0)) if len(V) else 1.0
-    C, BE, P, column = rig.handles_of_rig(parents, bind, W.max(0) > 0, 1e-6 * scale)
+    labels = [_label(f.g.nodes[n]) for n in joints]
+    C, BE, P, column = rig.handles_of_rig(parents, bind, W.max(0) > 0, 1e-6 * scale, labels)
     share = np.bincount(column, minlength=nJ)[column] if nJ else np.zeros(0)
     names = [f.g.nodes[n].name or f"joint{j}" for j, n in enumerate(joints)]
     anims = _animations(f, rest_local, joints, ibm) if nJ else []
@@ -310,6 +318,7 @@ def read_gltf(path, *, weld=True):
             "bind": bind,
             "weights": W,
             "column": column,
+            "labels": labels,
             "animations": anims,
         },
     }

@@ -53,7 +53,8 @@ def skeleton_rig(C, BE, P, names):
     bones); its child bones' nodes sit at its tail, and a bone without children gets an end node
     there (``<name>_end``, weight 0) so that every bone's tail is in the file.
 
-    Returns ``(names, parents, bind, column_joint)`` with ``column_joint[c] = c``.
+    Returns ``(names, parents, bind, column_joint, labels)`` with ``column_joint[c] = c`` and
+    ``labels`` the index in ``C`` of each node's position (kept in the file as node extras).
     """
     nP, m = len(P), len(BE)
     par = bone_parents(BE, len(C)) if m else np.zeros(0, dtype=np.int64)
@@ -73,46 +74,69 @@ def skeleton_rig(C, BE, P, names):
         end = bind[nP + b].copy()
         end[:3, 3] = C[BE[b, 1]]
         bind.append(end)
-    return names, np.array(parents, dtype=np.int64), np.array(bind), np.arange(nP + m)
+    labels = [int(p) for p in P] + [int(h) for h in BE[:, 0]] + [int(BE[b, 1]) for b in leaves]
+    return names, np.array(parents, dtype=np.int64), np.array(bind), np.arange(nP + m), labels
 
 
-def handles_of_rig(parents, bind, weights_used, tol):
+def handles_of_rig(parents, bind, weights_used, tol, labels=None):
     """The skinrs skeleton seen in glTF joint nodes: ``(C, BE, P, column_joint)``.
 
     A joint with children at other points gives one bone per distinct child point (head at the
     joint, tail at the child), all driven by that joint; a joint with no such child that carries
     weight is a point handle; one that carries none only marks where its parent's bone ends.
-    Points closer than ``tol`` are one joint of ``C``; joints are numbered in order of first
-    appearance (point handles, then each bone's head and tail).
+    Points closer than ``tol`` are one joint of ``C``. ``labels`` (J,), the joint index of each
+    node as :func:`skeleton_rig` wrote it, numbers ``C`` when they are consistent; otherwise
+    joints are numbered in order of first appearance (point handles, then bones' heads, tails).
     """
-    J = len(parents)
     pos = bind[:, :3, 3]
     points: list[np.ndarray] = []
+    point_nodes: list[list[int]] = []
 
-    def point(x) -> int:
+    def point(node: int) -> int:
         for i, q in enumerate(points):
-            if np.linalg.norm(q - x) <= tol:
+            if np.linalg.norm(q - pos[node]) <= tol:
+                point_nodes[i].append(node)
                 return i
-        points.append(x)
+        points.append(pos[node])
+        point_nodes.append([node])
         return len(points) - 1
 
-    segments: list[tuple[int, np.ndarray]] = []  # (driving joint, tail position)
+    segments: list[tuple[int, int]] = []  # (driving joint, a child node at the tail)
     handles = []
-    for j in range(J):
-        tails: list[np.ndarray] = []
+    for j in range(len(parents)):
+        tails: list[int] = []
         for c in np.flatnonzero(parents == j):
             if np.linalg.norm(pos[c] - pos[j]) > tol and all(
-                np.linalg.norm(pos[c] - t) > tol for t in tails
+                np.linalg.norm(pos[c] - pos[t]) > tol for t in tails
             ):
-                tails.append(pos[c])
+                tails.append(int(c))
         segments += [(j, t) for t in tails]
         if not tails and weights_used[j]:
             handles.append(j)
-    P = np.array([point(pos[j]) for j in handles], dtype=np.int64)
-    BE = np.array([(point(pos[j]), point(t)) for j, t in segments], dtype=np.int64)
+    P = np.array([point(j) for j in handles], dtype=np.int64)
+    BE = np.array([(point(j), point(t)) for j, t in segments], dtype=np.int64).reshape(-1, 2)
     column_joint = np.array(handles + [j for j, _ in segments], dtype=np.int64)
     C = np.array(points).reshape(-1, 3)
-    return C, BE.reshape(-1, 2), P, column_joint
+    order = _joint_numbers(labels, point_nodes)
+    if order is not None:
+        C[order] = C.copy()
+        P, BE = order[P], order[BE]
+    return C, BE, P, column_joint
+
+
+def _joint_numbers(labels, point_nodes):
+    """Number of each point from the nodes' labels, or None unless every point has one label
+    and together they are ``0 .. len - 1``."""
+    if labels is None or any(x is None for x in labels):
+        return None
+    order = []
+    for nodes in point_nodes:
+        own = {int(labels[n]) for n in nodes}
+        if len(own) != 1:
+            return None
+        order.append(own.pop())
+    order = np.array(order, dtype=np.int64)
+    return order if np.array_equal(np.sort(order), np.arange(len(order))) else None
 
 
 def decompose(M: np.ndarray, what: str):
