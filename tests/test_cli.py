@@ -13,8 +13,6 @@ import pytest
 import skinrs
 from skinrs.io import read_gltf
 
-ROOT = Path(__file__).resolve().parents[1]
-ARM = ROOT / "tests" / "data" / "arm"
 COMMANDS = ("weights", "reduce", "pose", "info")
 
 
@@ -38,11 +36,17 @@ def assert_one_line_error(run, *words):
 
 
 @pytest.fixture(scope="module")
-def arm_glb(tmp_path_factory):
+def arm(data_dir):
+    """tests/data/arm: the libigl arm (arm.obj, arm.tgf)."""
+    return data_dir / "arm"
+
+
+@pytest.fixture(scope="module")
+def arm_glb(tmp_path_factory, arm):
     """``skinrs weights arm.obj arm.tgf -o arm.glb`` (the README's example), run once."""
     out = tmp_path_factory.mktemp("cli") / "arm.glb"
     t0 = time.perf_counter()
-    run = skinrs_cli("weights", ARM / "arm.obj", ARM / "arm.tgf", "-o", out)
+    run = skinrs_cli("weights", arm / "arm.obj", arm / "arm.tgf", "-o", out)
     print(f"skinrs weights arm.obj arm.tgf -o arm.glb: {time.perf_counter() - t0:.1f} s")
     assert run.returncode == 0, run.stderr
     return out
@@ -71,10 +75,10 @@ def test_help_on_every_command():
     assert run.returncode == 0 and all(c in run.stdout for c in COMMANDS)
 
 
-def test_weights_of_the_arm_as_a_glb(arm_glb):
+def test_weights_of_the_arm_as_a_glb(arm, arm_glb):
     a = read_gltf(arm_glb)
-    V, F = skinrs.io.read_obj(ARM / "arm.obj")
-    C, BE = skinrs.io.read_tgf(ARM / "arm.tgf")
+    V, F = skinrs.io.read_obj(arm / "arm.obj")
+    C, BE = skinrs.io.read_tgf(arm / "arm.tgf")
     assert np.abs(a["V"] - V).max() <= 1e-6 and (a["F"] == F).all()
     np.testing.assert_array_equal(a["BE"], BE)
     W = a["W"]
@@ -141,7 +145,7 @@ def test_reduce(capsule, tmp_path):
     assert_one_line_error(run, "--method poisson needs --mesh and --skeleton")
 
 
-def test_pose_writes_a_picture(arm_glb, tmp_path):
+def test_pose_writes_a_picture(arm, arm_glb, tmp_path):
     for pose, extra in (("random:1", []), ("random:2", ["--dqs"])):
         out = tmp_path / f"{pose.replace(':', '')}.png"
         run = skinrs_cli("pose", arm_glb, "--pose", pose, *extra, "-o", out)
@@ -149,12 +153,12 @@ def test_pose_writes_a_picture(arm_glb, tmp_path):
         assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     run = skinrs_cli("pose", arm_glb, "--pose", "frame:0", "-o", tmp_path / "f.png")
     assert_one_line_error(run, "has no animation")
-    run = skinrs_cli("pose", ARM / "arm.obj", "-o", tmp_path / "f.png")
+    run = skinrs_cli("pose", arm / "arm.obj", "-o", tmp_path / "f.png")
     assert_one_line_error(run, "not a skinned glTF asset")
 
 
-def test_info(arm_glb):
-    run = skinrs_cli("info", ARM / "arm.obj", ARM / "arm.tgf", "--json")
+def test_info(arm, arm_glb):
+    run = skinrs_cli("info", arm / "arm.obj", arm / "arm.tgf", "--json")
     assert run.returncode == 0, run.stderr
     info = json.loads(run.stdout)
     assert info["vertices"] == 8311 and info["faces"] == 16618 and info["watertight"]
@@ -163,31 +167,31 @@ def test_info(arm_glb):
     assert run.returncode == 0 and "bones: 4" in run.stdout and "bone3_end" in run.stdout
 
 
-def test_bad_files_and_arguments(tmp_path):
+def test_bad_files_and_arguments(arm, tmp_path):
     (tmp_path / "bad.glb").write_bytes(b"garbage")
     (tmp_path / "bad.obj").write_text("v 0 0 0\nf 1 2 3\n")
     cases = [
-        (("weights", tmp_path / "missing.obj", ARM / "arm.tgf", "-o", tmp_path / "o.glb"), "no such file"),
-        (("weights", ARM / "arm.obj", ARM / "arm.tgf", "-o", tmp_path / "o.xyz"), "unknown output format"),
-        (("weights", ARM / "arm.obj", "-o", tmp_path / "o.glb"), "no skeleton"),
-        (("weights", ARM / "arm.obj", ARM / "arm.obj", "-o", tmp_path / "o.glb"), "unknown skeleton format"),
-        (("weights", tmp_path / "bad.obj", ARM / "arm.tgf", "-o", tmp_path / "o.glb"), "out of range"),
+        (("weights", tmp_path / "missing.obj", arm / "arm.tgf", "-o", tmp_path / "o.glb"), "no such file"),
+        (("weights", arm / "arm.obj", arm / "arm.tgf", "-o", tmp_path / "o.xyz"), "unknown output format"),
+        (("weights", arm / "arm.obj", "-o", tmp_path / "o.glb"), "no skeleton"),
+        (("weights", arm / "arm.obj", arm / "arm.obj", "-o", tmp_path / "o.glb"), "unknown skeleton format"),
+        (("weights", tmp_path / "bad.obj", arm / "arm.tgf", "-o", tmp_path / "o.glb"), "out of range"),
         (("info", tmp_path / "bad.glb"), "not a readable glTF"),
-        (("info", ARM / "arm.tgf"), "unknown mesh format"),
+        (("info", arm / "arm.tgf"), "unknown mesh format"),
     ]  # fmt: skip
     for args, words in cases:
         assert_one_line_error(skinrs_cli(*args), words)
     assert not list(tmp_path.glob("o.*")) and not list(tmp_path.glob(".skinrs-*"))
-    run = skinrs_cli("weights", ARM / "arm.obj", "--method", "nope", "-o", tmp_path / "o.glb")
+    run = skinrs_cli("weights", arm / "arm.obj", "--method", "nope", "-o", tmp_path / "o.glb")
     assert run.returncode == 2 and "invalid choice" in run.stderr
     run = skinrs_cli("--debug", "info", tmp_path / "bad.glb")
     assert run.returncode != 0 and "Traceback" in run.stderr
 
 
-def test_ctrl_c_exits_130_and_writes_nothing(tmp_path):
+def test_ctrl_c_exits_130_and_writes_nothing(arm, tmp_path):
     out = tmp_path / "arm.glb"
     proc = subprocess.Popen(
-        [sys.executable, "-m", "skinrs", "weights", ARM / "arm.obj", ARM / "arm.tgf", "-o", out],
+        [sys.executable, "-m", "skinrs", "weights", arm / "arm.obj", arm / "arm.tgf", "-o", out],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,

@@ -15,7 +15,6 @@ from skinrs import gltf_rig
 from skinrs.io import read_gltf, write_gltf
 
 ROOT = Path(__file__).resolve().parents[1]
-ARM = ROOT / "tests" / "data" / "arm"
 
 # Runs inside Blender's Python: imports a .glb, evaluates the skinned mesh at every frame of its
 # action and saves rest/posed vertices and bone heads/tails in glTF's Y-up coordinates.
@@ -70,9 +69,9 @@ def blender_python():
 
 
 @pytest.fixture(scope="module")
-def arm():
-    V, F = skinrs.io.read_obj(ARM / "arm.obj")
-    C, BE = skinrs.io.read_tgf(ARM / "arm.tgf")
+def arm(data_dir):
+    V, F = skinrs.io.read_obj(data_dir / "arm" / "arm.obj")
+    C, BE = skinrs.io.read_tgf(data_dir / "arm" / "arm.tgf")
     # two more bones branch off the elbow: joint nodes that share a head must still turn apart
     C = np.vstack([C, C[2] + [0, 0.25, 0.05], C[2] + [0, -0.2, 0.1]])
     BE = np.vstack([BE, [[2, 5], [2, 6]]])
