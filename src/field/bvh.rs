@@ -343,10 +343,8 @@ impl<const D: usize> Boundary<D> {
             );
         }
         let nv = v.nrows();
+        crate::limits::check_coordinates("V", &v)?;
         let verts: Vec<[f64; D]> = (0..nv).map(|i| row(&v, i)).collect();
-        if let Some(i) = verts.iter().position(|p| p.iter().any(|x| !x.is_finite())) {
-            return invalid!("V has a NaN or infinite entry (row {i})");
-        }
         let mut elems = Vec::with_capacity(f.nrows());
         for (e, r) in f.axis_iter(Axis(0)).enumerate() {
             let mut idx = [0usize; D];
@@ -428,7 +426,7 @@ impl<const D: usize> Boundary<D> {
         let mut stack: Vec<(u32, f64)> = Vec::with_capacity(64);
         stack.push((0, self.bvh.nodes[0].bbox.dist2(x)));
         while let Some((ni, d2)) = stack.pop() {
-            if d2 > best.0 {
+            if d2 > best.0 && best.2 != usize::MAX {
                 continue;
             }
             let node = &self.bvh.nodes[ni as usize];
@@ -436,7 +434,12 @@ impl<const D: usize> Boundary<D> {
                 let s = node.start as usize;
                 for &e in &self.bvh.order[s..s + node.count as usize] {
                     let (d2, p) = closest(e as usize);
-                    if d2 < best.0 || (d2 == best.0 && (e as usize) < best.2) {
+                    // `best.2 == usize::MAX`: take the first candidate even if its distance is
+                    // not finite, so a primitive is always returned.
+                    if d2 < best.0
+                        || (d2 == best.0 && (e as usize) < best.2)
+                        || best.2 == usize::MAX
+                    {
                         best = (d2, p, e as usize);
                     }
                 }
@@ -506,10 +509,7 @@ pub(crate) fn check_queries<const D: usize>(x: &ArrayView2<f64>, name: &str) -> 
             x.dim()
         );
     }
-    if let Some((i, _)) = x.indexed_iter().find(|(_, v)| !v.is_finite()) {
-        return invalid!("{name} has a NaN or infinite entry (row {})", i.0);
-    }
-    Ok(())
+    crate::limits::check_coordinates(name, x)
 }
 
 /// Möller–Trumbore: does `p + t d`, `0 < t < 1`, cross triangle `abc` (edges included)?
@@ -619,6 +619,12 @@ pub fn closest_on_segment<const D: usize>(x: &[f64; D], a: &[f64; D], b: &[f64; 
 /// Unit normal of a triangle, zero if degenerate.
 pub fn triangle_normal(a: &P3, b: &P3, c: &P3) -> P3 {
     let n = cross(&sub(b, a), &sub(c, a));
+    // Divide by the largest entry first: the squared length neither overflows nor underflows.
+    let big = n.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    if !(big > 0.0 && big.is_finite()) {
+        return [0.0; 3];
+    }
+    let n = scale(&n, 1.0 / big);
     let l = norm2(&n).sqrt();
     if l > 0.0 {
         scale(&n, 1.0 / l)

@@ -17,6 +17,11 @@ use rayon::prelude::*;
 use super::kernel::FieldValue;
 use super::optimize::GeometricField;
 use super::{cross, norm2, sub, Boundary, BoundaryQueries};
+use crate::error::SkinResult;
+use crate::progress::{Event, Progress};
+
+/// Rows per block between two progress reports of an evaluation.
+const EVAL_BLOCK: usize = 4096;
 
 /// Inward nudge of the ray origins of vertex evaluations (unit-box units, App. A).
 pub const NUDGE: f64 = 1e-5;
@@ -88,19 +93,31 @@ where
         }
     }
 
-    /// Weights at the rows of `q` (input units); see the module doc.
-    pub fn evaluate(&self, q: ArrayView2<f64>) -> (Array2<f64>, Vec<u8>) {
+    /// Weights at the rows of `q` (input units); see the module doc. Blocks of rows report to
+    /// `progress` in between (Ctrl-C stops the evaluation there).
+    pub fn evaluate(
+        &self,
+        q: ArrayView2<f64>,
+        progress: &mut dyn Progress,
+    ) -> SkinResult<(Array2<f64>, Vec<u8>)> {
         let k = self.k();
-        let rows: Vec<(Vec<f64>, u8)> = (0..q.nrows())
-            .into_par_iter()
-            .map(|i| {
+        let n = q.nrows();
+        let mut rows: Vec<(Vec<f64>, u8)> = Vec::with_capacity(n);
+        for start in (0..n).step_by(EVAL_BLOCK) {
+            let end = (start + EVAL_BLOCK).min(n);
+            rows.par_extend((start..end).into_par_iter().map(|i| {
                 let z = self.to_unit(&super::row(&q, i));
                 let mut out = vec![0.0; k];
                 let s = self.row_with_fallback(&z, &z, &mut out);
                 (out, s)
-            })
-            .collect();
-        collect_rows(rows, k)
+            }));
+            progress.report(Event {
+                stage: "evaluate",
+                iteration: end,
+                value: f64::NAN,
+            })?;
+        }
+        Ok(collect_rows(rows, k))
     }
 
     /// Weights at the vertices `v` (input units); `normal_elems` (#E by D, may be empty) give

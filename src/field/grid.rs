@@ -26,6 +26,7 @@ use rayon::prelude::*;
 use super::{norm2, row, sub};
 use crate::error::SkinResult;
 use crate::invalid;
+use crate::progress::{Event, Progress};
 
 /// Multiplicative hash for integer cell keys. The default SipHash is built to resist
 /// adversarial keys, which cell coordinates are not, and costs more than the distance tests a
@@ -97,10 +98,8 @@ impl<const D: usize> HashGrid<D> {
         if !(cell > 0.0 && cell.is_finite()) {
             return invalid!("cell size must be positive and finite, got {cell}");
         }
+        crate::limits::check_coordinates("X", &x)?;
         let points: Vec<[f64; D]> = (0..x.nrows()).map(|i| row(&x, i)).collect();
-        if let Some(i) = points.iter().position(|p| p.iter().any(|v| !v.is_finite())) {
-            return invalid!("X has a NaN or infinite entry (row {i})");
-        }
         let mut origin = [f64::INFINITY; D];
         for p in &points {
             for k in 0..D {
@@ -133,7 +132,10 @@ impl<const D: usize> HashGrid<D> {
         let mut total: Option<usize> = Some(1);
         for a in (0..D).rev() {
             strides[a] = total.unwrap_or(0);
-            let span = usize::try_from(key_hi[a] - key_lo[a] + 1).ok();
+            let span = key_hi[a]
+                .checked_sub(key_lo[a])
+                .and_then(|w| w.checked_add(1))
+                .and_then(|w| usize::try_from(w).ok());
             total = total.zip(span).and_then(|(t, w)| t.checked_mul(w));
         }
         let dense = match total {
@@ -175,9 +177,14 @@ impl<const D: usize> HashGrid<D> {
             }
         }
         let big = ext.iter().cloned().fold(0.0, f64::max);
-        let cell = if big > 0.0 && big.is_finite() {
-            let vol: f64 = ext.iter().map(|&e| e.max(1e-3 * big)).product();
-            (vol * per_cell.max(1.0) / x.nrows().max(1) as f64).powf(1.0 / D as f64)
+        // The box volume relative to `big^D` (each factor in [1e-3, 1]), so that neither the
+        // volume nor the cell size overflows or underflows for any finite coordinates.
+        let rel: f64 = ext.iter().map(|&e| (e / big).max(1e-3)).product();
+        let cell = big * (rel * per_cell.max(1.0) / x.nrows().max(1) as f64).powf(1.0 / D as f64);
+        let cell = if cell > 0.0 && cell.is_finite() {
+            cell
+        } else if big > 0.0 && big.is_finite() {
+            big
         } else {
             1.0
         };
@@ -277,11 +284,21 @@ impl<const D: usize> HashGrid<D> {
         // outside the cube of searched cells, so stop once the k-th best distance is within the
         // distance from q to that cube's boundary (at least s * cell).
         let max_ring = (0..D)
-            .map(|a| (c[a] - self.key_lo[a]).max(self.key_hi[a] - c[a]).max(0))
+            .map(|a| {
+                c[a].saturating_sub(self.key_lo[a])
+                    .max(self.key_hi[a].saturating_sub(c[a]))
+                    .max(0)
+            })
             .max()
             .unwrap_or(0);
+        // Far from the points (an outlier, a query far outside) the rings would visit more
+        // cells than there are points: past this many cells, one linear scan is cheaper.
+        let cell_budget = 8.0 * self.points.len() as f64 + 64.0;
         let mut s: i64 = 0;
         loop {
+            if ((2 * s + 1) as f64).powi(D as i32) > cell_budget {
+                return self.knn_scan(q, k, skip);
+            }
             self.ring(&c, s, |i| {
                 if Some(i) == skip {
                     return;
@@ -319,10 +336,27 @@ impl<const D: usize> HashGrid<D> {
             .collect()
     }
 
+    /// [`HashGrid::knn`] by one pass over every point (linear time, no ring search).
+    fn knn_scan(&self, q: &[f64; D], k: usize, skip: Option<u32>) -> Vec<(f64, usize)> {
+        let mut all: Vec<(f64, u32)> = (0..self.points.len() as u32)
+            .filter(|&i| Some(i) != skip)
+            .map(|i| (norm2(&sub(&self.points[i as usize], q)), i))
+            .collect();
+        let by = |a: &(f64, u32), b: &(f64, u32)| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1));
+        if k < all.len() {
+            all.select_nth_unstable_by(k, by);
+            all.truncate(k);
+        }
+        all.sort_unstable_by(by);
+        all.into_iter()
+            .map(|(d2, i)| (d2.sqrt(), i as usize))
+            .collect()
+    }
+
     /// Calls `visit` for every point in the cells at Chebyshev distance exactly `s` from `c`.
     fn ring(&self, c: &[i64; D], s: i64, mut visit: impl FnMut(u32)) {
-        let lo: [i64; D] = std::array::from_fn(|k| c[k] - s);
-        let hi: [i64; D] = std::array::from_fn(|k| c[k] + s);
+        let lo: [i64; D] = std::array::from_fn(|k| c[k].saturating_sub(s));
+        let hi: [i64; D] = std::array::from_fn(|k| c[k].saturating_add(s));
         let mut x = lo;
         loop {
             let on_ring = (0..D).any(|k| x[k] == lo[k] || x[k] == hi[k]);
@@ -354,29 +388,49 @@ impl<const D: usize> HashGrid<D> {
         }
     }
 
-    /// For every point, the distance to its `k`-th nearest other point, in parallel.
-    pub fn knn_distance_self(&self, k: usize) -> SkinResult<Vec<f64>> {
+    /// For every point, the distance to its `k`-th nearest other point, in parallel; blocks of
+    /// points report to `progress` in between (Ctrl-C stops the computation there).
+    pub fn knn_distance_self(&self, k: usize, progress: &mut dyn Progress) -> SkinResult<Vec<f64>> {
         if k == 0 || k >= self.points.len() {
             return invalid!(
                 "k must be in 1..{} (fewer than the number of points), got {k}",
                 self.points.len()
             );
         }
-        Ok((0..self.points.len())
-            .into_par_iter()
-            .map(|i| self.knn(&self.points[i], k, Some(i))[k - 1].0)
-            .collect())
+        let n = self.points.len();
+        let mut out = Vec::with_capacity(n);
+        for start in (0..n).step_by(PROGRESS_BLOCK) {
+            let end = (start + PROGRESS_BLOCK).min(n);
+            out.par_extend(
+                (start..end)
+                    .into_par_iter()
+                    .map(|i| self.knn(&self.points[i], k, Some(i))[k - 1].0),
+            );
+            progress.report(Event {
+                stage: "knn",
+                iteration: end,
+                value: f64::NAN,
+            })?;
+        }
+        Ok(out)
     }
 }
 
+/// Points per block between two progress reports of a parallel loop.
+pub(crate) const PROGRESS_BLOCK: usize = 1 << 14;
+
 /// Distance from each row of `x` (#X by D, D = 2 or 3) to its `k`-th nearest other row.
 /// Coincident points count (distance 0). Needs `1 <= k < #X`.
-pub fn knn_distance(x: ArrayView2<f64>, k: usize) -> SkinResult<Vec<f64>> {
+pub fn knn_distance(
+    x: ArrayView2<f64>,
+    k: usize,
+    progress: &mut dyn Progress,
+) -> SkinResult<Vec<f64>> {
     match x.ncols() {
         // About k / 2 points per cell: the k-th neighbour then usually lies within one ring of
         // cells, and a ring visits half the points it would with k per cell.
-        2 => HashGrid::<2>::auto(x, 0.5 * k as f64)?.knn_distance_self(k),
-        3 => HashGrid::<3>::auto(x, 0.5 * k as f64)?.knn_distance_self(k),
+        2 => HashGrid::<2>::auto(x, 0.5 * k as f64)?.knn_distance_self(k, progress),
+        3 => HashGrid::<3>::auto(x, 0.5 * k as f64)?.knn_distance_self(k, progress),
         c => invalid!("X must have 2 or 3 columns, got {c}"),
     }
 }
@@ -447,9 +501,21 @@ mod tests {
         check_against_brute_force(&y, &g, 0.12);
         let g = HashGrid::<3>::auto(y.view(), 4.0).unwrap();
         check_against_brute_force(&y, &g, 30.0);
-        let kd = knn_distance(x.view(), 9).unwrap();
+        let kd = knn_distance(x.view(), 9, &mut crate::Silent).unwrap();
         assert_eq!(kd.len(), 500);
         assert!(kd.iter().all(|&v| v > 0.0));
-        assert!(knn_distance(x.view(), 500).is_err());
+        assert!(knn_distance(x.view(), 500, &mut crate::Silent).is_err());
+    }
+
+    #[test]
+    fn far_outlier_falls_back_to_a_linear_scan() {
+        let mut x = cloud(400, 7);
+        x[[0, 0]] = 1e6;
+        let g = HashGrid::<3>::auto(x.view(), 4.5).unwrap();
+        check_against_brute_force(&x, &g, 0.3);
+        let q = [1e9, 0.5, 0.5];
+        let near = g.knn(&q, 3, None);
+        assert_eq!(near[0].1, 0);
+        assert_eq!(near.len(), 3);
     }
 }

@@ -88,7 +88,7 @@ where
             );
         }
         let a = to_array(&x);
-        let kd = super::knn_distance(a.view(), SIGMA_KNN)?;
+        let kd = super::knn_distance(a.view(), SIGMA_KNN, &mut crate::Silent)?;
         let mut s = kd.clone();
         s.sort_by(f64::total_cmp);
         let sigma = s[s.len() / 2];

@@ -135,7 +135,29 @@ pub fn unit_box<const D: usize>(v: &ndarray::ArrayView2<f64>) -> SkinResult<([f6
     if !(ext > 0.0 && ext.is_finite()) {
         return invalid!("the vertices span no extent (all coincide, or V is empty)");
     }
+    crate::limits::check_coordinates("V", v)?;
+    crate::limits::check_extent("V", ext)?;
     Ok((lo, 1.0 / ext))
+}
+
+/// A field lives in a solid (3D) or a region (2D): vertices that span no extent along some axis
+/// bound nothing, and every sample would sit on the boundary.
+fn check_solid<const D: usize>(v: &ndarray::ArrayView2<f64>, scale: f64) -> SkinResult<()> {
+    for k in 0..D {
+        let c = v.column(k);
+        let lo = c.iter().cloned().fold(f64::INFINITY, f64::min);
+        let hi = c.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+        if (hi - lo) * scale <= 1e-9 {
+            return invalid!(
+                "V is flat: it spans no extent along axis {k} ({:e} against {:e} along its \
+                 longest axis), so it encloses no {}; a field needs a shape with an interior",
+                hi - lo,
+                1.0 / scale,
+                if D == 3 { "volume" } else { "area" }
+            );
+        }
+    }
+    Ok(())
 }
 
 impl<const D: usize> GeometricField<D>
@@ -156,6 +178,7 @@ where
             return invalid!("no handles: give point handles P and/or bone edges BE");
         }
         let (offset, scale) = unit_box::<D>(&v)?;
+        check_solid::<D>(&v, scale)?;
         let vu = v.map(|x| *x); // copy, then rescale column-wise
         let mut vu = vu;
         for mut r in vu.rows_mut() {
@@ -468,10 +491,14 @@ fn cloud_radius(v: &ndarray::Array2<f64>) -> SkinResult<f64> {
             v.nrows()
         );
     }
-    let mut d = super::knn_distance(v.view(), super::kernel::SIGMA_KNN)?;
+    let mut d = super::knn_distance(v.view(), super::kernel::SIGMA_KNN, &mut crate::Silent)?;
     d.sort_by(f64::total_cmp);
     Ok(d[d.len() / 2])
 }
+
+/// Largest point set, sample count or pool a field accepts (each costs tens of bytes per entry
+/// and per handle).
+pub const MAX_POINTS: usize = 1 << 24;
 
 fn check_options(o: &FieldOptions) -> SkinResult<()> {
     if o.n_init <= super::kernel::SIGMA_KNN || o.samples == 0 || o.pool == 0 {
@@ -489,6 +516,20 @@ fn check_options(o: &FieldOptions) -> SkinResult<()> {
     }
     if o.upsamples > 8 {
         return invalid!("at most 8 upsamplings (the point set doubles each time)");
+    }
+    // Each of these sizes one allocation before any other work: refuse sizes no machine holds.
+    let most_points = o
+        .n_init
+        .checked_shl(o.upsamples as u32)
+        .unwrap_or(usize::MAX);
+    for (name, x) in [
+        ("n_points * 2^upsamples", most_points),
+        ("samples", o.samples),
+        ("pool", o.pool),
+    ] {
+        if x > MAX_POINTS {
+            return invalid!("{name} must be at most {MAX_POINTS}, got {x}");
+        }
     }
     Ok(())
 }

@@ -59,47 +59,49 @@ struct Expansion<const D: usize> {
 
 impl<const D: usize> Expansion<D> {
     /// The order-2 far-field angle at `q` (not yet divided by the full angle).
+    ///
+    /// Written in the unit direction `u = r / d` and powers of `1 / d`, so that no intermediate
+    /// grows with a power of the distance: far queries underflow to 0 instead of giving
+    /// `inf * 0 = NaN`.
     #[inline]
     fn eval(&self, q: &[f64; D]) -> f64 {
         let r = sub(&self.center, q);
-        let d2 = norm2(&r);
+        let d = norm2(&r).sqrt();
+        let u = scale(&r, 1.0 / d);
         let dd = D as f64;
-        // 1 / d^D, 1 / d^(D+2), 1 / d^(D+4)
-        let inv_d = if D == 3 {
-            1.0 / (d2 * d2.sqrt())
-        } else {
-            1.0 / d2
-        };
-        let inv_d2 = inv_d / d2;
-        let inv_d4 = inv_d2 / d2;
-        // Order 0: g(r) . N.
-        let o0 = dot(&r, &self.n) * inv_d;
-        // Order 1: J : M = tr(M) / d^D - D r^T M r / d^(D+2).
+        let inv = 1.0 / d;
+        // 1 / d^(D-1), 1 / d^D, 1 / d^(D+1)
+        let inv_a = if D == 3 { inv * inv } else { inv };
+        let inv_b = inv_a * inv;
+        let inv_c = inv_b * inv;
+        // Order 0: g(r) . N = (u . N) / d^(D-1).
+        let o0 = dot(&u, &self.n) * inv_a;
+        // Order 1: J : M = (tr(M) - D u^T M u) / d^D.
         let mut tr = 0.0;
-        let mut rmr = 0.0;
+        let mut umu = 0.0;
         for i in 0..D {
             tr += self.m[i][i];
-            rmr += r[i] * dot(&self.m[i], &r);
+            umu += u[i] * dot(&self.m[i], &u);
         }
-        let o1 = tr * inv_d - dd * rmr * inv_d2;
-        // Order 2: H : C = -D (2 sum_ik C_iik r_k + sum_i r_i sum_j C_ijj) / d^(D+2)
-        //                  + D (D+2) C[r, r, r] / d^(D+4)   (C symmetric in its last two indices).
+        let o1 = (tr - dd * umu) * inv_b;
+        // Order 2: H : C = (-D (2 sum_ik C_iik u_k + sum_i u_i sum_j C_ijj)
+        //                  + D (D+2) C[u, u, u]) / d^(D+1)   (C symmetric in its last two indices).
         let mut a = 0.0;
         let mut b = 0.0;
         let mut e = 0.0;
         for i in 0..D {
             let ci = &self.c[i];
-            a += dot(&ci[i], &r);
+            a += dot(&ci[i], &u);
             let mut t = 0.0;
-            let mut rcr = 0.0;
+            let mut ucu = 0.0;
             for j in 0..D {
                 t += ci[j][j];
-                rcr += r[j] * dot(&ci[j], &r);
+                ucu += u[j] * dot(&ci[j], &u);
             }
-            b += r[i] * t;
-            e += r[i] * rcr;
+            b += u[i] * t;
+            e += u[i] * ucu;
         }
-        let o2 = 0.5 * (-dd * (2.0 * a + b) * inv_d2 + dd * (dd + 2.0) * e * inv_d4);
+        let o2 = 0.5 * (-dd * (2.0 * a + b) + dd * (dd + 2.0) * e) * inv_c;
         o0 + o1 + o2
     }
 }

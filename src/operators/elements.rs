@@ -206,7 +206,10 @@ pub fn check_elements(v: ArrayView2<f64>, f: ArrayView2<usize>) -> SkinResult<()
     {
         return invalid!("V row {r} has a NaN or infinite coordinate");
     }
-    let tol = 1e-14 * bbox_diagonal(&v).powi(kind.dim());
+    crate::limits::check_coordinates("V", &v)?;
+    let diag = bbox_diagonal(&v);
+    crate::limits::check_extent("V", diag)?;
+    let tol = 1e-14 * diag.powi(kind.dim());
     let measures = element_measures(v, f);
     let bad = measures
         .par_iter()

@@ -5,7 +5,7 @@ use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2}
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use super::{index_array, to_pyerr, PyProgress};
+use super::{index_array, released, to_pyerr, PyProgress};
 use crate::bbw::{bbw_dual, BbwOptions, EliminatedProblem, Solver};
 use crate::constraints::boundary_conditions;
 use crate::sparse::Csc;
@@ -27,9 +27,7 @@ fn py_boundary_conditions<'py>(
     let be = index_array(&be, nc, "BE")?;
     let p: Vec<usize> = p.iter().copied().collect();
     let (v, c) = (v.as_array(), c.as_array());
-    let r = py
-        .detach(|| boundary_conditions(v, c, &p, be.view(), tol))
-        .map_err(to_pyerr)?;
+    let r = released(py, || boundary_conditions(v, c, &p, be.view(), tol))?;
     let b: Vec<i64> = r.b.iter().map(|&i| i as i64).collect();
     Ok((b.into_pyarray(py), r.bc.into_pyarray(py)))
 }
@@ -118,12 +116,10 @@ fn py_bbw_dual<'py>(
         memory: memory.max(1),
     };
     let mut progress = PyProgress::new(callback);
-    let (w, info): (Array2<f64>, _) = py
-        .detach(|| {
-            let prob = EliminatedProblem::new(&bmat, &b_idx, bc.view())?;
-            bbw_dual(&prob, &opts, &mut progress)
-        })
-        .map_err(to_pyerr)?;
+    let (w, info): (Array2<f64>, _) = released(py, || {
+        let prob = EliminatedProblem::new(&bmat, &b_idx, bc.view())?;
+        bbw_dual(&prob, &opts, &mut progress)
+    })?;
     let d = PyDict::new(py);
     d.set_item("solver", info.solver)?;
     d.set_item("iterations", info.iterations)?;

@@ -9,8 +9,8 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use super::{index_array, to_pyerr, PyProgress};
-use crate::error::{SkinError, SkinResult};
+use super::{index_array, released, PyProgress};
+use crate::error::SkinResult;
 use crate::field::{self, Boundary, BoundaryQueries, Closest, FastWinding};
 use crate::field::{FieldOptions, GeometricField};
 
@@ -35,15 +35,13 @@ fn _winding_number<'py>(
     let (vv, qq) = (v.as_array(), q.as_array());
     let ff = index_array(&f, vv.nrows(), "F")?;
     let d = dim(&vv, &ff)?;
-    let w = py
-        .detach(|| -> SkinResult<Vec<f64>> {
-            if d == 3 {
-                FastWinding::<3>::new(vv, ff.view(), beta)?.eval_batch(qq)
-            } else {
-                FastWinding::<2>::new(vv, ff.view(), beta)?.eval_batch(qq)
-            }
-        })
-        .map_err(to_pyerr)?;
+    let w = released(py, || -> SkinResult<Vec<f64>> {
+        if d == 3 {
+            FastWinding::<3>::new(vv, ff.view(), beta)?.eval_batch(qq)
+        } else {
+            FastWinding::<2>::new(vv, ff.view(), beta)?.eval_batch(qq)
+        }
+    })?;
     Ok(w.into_pyarray(py))
 }
 
@@ -58,15 +56,13 @@ fn _segment_hits<'py>(
     let (vv, pp, qq) = (v.as_array(), p.as_array(), q.as_array());
     let ff = index_array(&f, vv.nrows(), "F")?;
     let d = dim(&vv, &ff)?;
-    let hits = py
-        .detach(|| -> SkinResult<Vec<bool>> {
-            if d == 3 {
-                Boundary::<3>::new(vv, ff.view())?.segment_hits_batch(pp, qq)
-            } else {
-                Boundary::<2>::new(vv, ff.view())?.segment_hits_batch(pp, qq)
-            }
-        })
-        .map_err(to_pyerr)?;
+    let hits = released(py, || -> SkinResult<Vec<bool>> {
+        if d == 3 {
+            Boundary::<3>::new(vv, ff.view())?.segment_hits_batch(pp, qq)
+        } else {
+            Boundary::<2>::new(vv, ff.view())?.segment_hits_batch(pp, qq)
+        }
+    })?;
     Ok(hits.into_pyarray(py))
 }
 
@@ -104,15 +100,13 @@ fn _closest_point<'py>(
     let (vv, qq) = (v.as_array(), q.as_array());
     let ff = index_array(&f, vv.nrows(), "F")?;
     let d = dim(&vv, &ff)?;
-    let r = py
-        .detach(|| -> SkinResult<ClosestArrays> {
-            Ok(if d == 3 {
-                unpack(Boundary::<3>::new(vv, ff.view())?.closest_batch(qq)?)
-            } else {
-                unpack(Boundary::<2>::new(vv, ff.view())?.closest_batch(qq)?)
-            })
+    let r = released(py, || -> SkinResult<ClosestArrays> {
+        Ok(if d == 3 {
+            unpack(Boundary::<3>::new(vv, ff.view())?.closest_batch(qq)?)
+        } else {
+            unpack(Boundary::<2>::new(vv, ff.view())?.closest_batch(qq)?)
         })
-        .map_err(to_pyerr)?;
+    })?;
     Ok((
         r.dist.into_pyarray(py),
         r.point.into_pyarray(py),
@@ -128,25 +122,9 @@ fn _knn_distance<'py>(
     k: usize,
 ) -> PyResult<Bound<'py, PyArray1<f64>>> {
     let xx = x.as_array();
-    let d = py.detach(|| field::knn_distance(xx, k)).map_err(to_pyerr)?;
+    let mut progress = PyProgress::new(None);
+    let d = released(py, || field::knn_distance(xx, k, &mut progress))?;
     Ok(d.into_pyarray(py))
-}
-
-/// Runs `f`, turning a Rust panic into an error (a panic must never reach Python as such).
-fn guard<T>(f: impl FnOnce() -> SkinResult<T>) -> SkinResult<T> {
-    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)) {
-        Ok(r) => r,
-        Err(p) => {
-            let msg = p
-                .downcast_ref::<String>()
-                .cloned()
-                .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
-                .unwrap_or_default();
-            Err(SkinError::Numerical(format!(
-                "internal error in skinrs (please report): {msg}"
-            )))
-        }
-    }
 }
 
 /// A geometric field in 2D or 3D.
@@ -275,21 +253,17 @@ impl PyGeometricField {
         let bb = index_array(&be, cc.nrows(), "BE")?;
         let k = pp.len() + bb.nrows();
         let o = options(d, opts)?;
-        let inner = py
-            .detach(|| {
-                guard(|| {
-                    let fv = ff.as_ref().map(|x| x.view());
-                    let sv = ss.as_ref().map(|x| x.view());
-                    Ok(if d == 2 {
-                        let h = handles::<2>(&cc, &pp, &bb);
-                        Inner::D2(Box::new(GeometricField::new(vv, fv, sv, h, k, o)?))
-                    } else {
-                        let h = handles::<3>(&cc, &pp, &bb);
-                        Inner::D3(Box::new(GeometricField::new(vv, fv, sv, h, k, o)?))
-                    })
-                })
+        let inner = released(py, || {
+            let fv = ff.as_ref().map(|x| x.view());
+            let sv = ss.as_ref().map(|x| x.view());
+            Ok(if d == 2 {
+                let h = handles::<2>(&cc, &pp, &bb);
+                Inner::D2(Box::new(GeometricField::new(vv, fv, sv, h, k, o)?))
+            } else {
+                let h = handles::<3>(&cc, &pp, &bb);
+                Inner::D3(Box::new(GeometricField::new(vv, fv, sv, h, k, o)?))
             })
-            .map_err(to_pyerr)?;
+        })?;
         Ok(PyGeometricField { inner })
     }
 
@@ -304,8 +278,9 @@ impl PyGeometricField {
     ) -> PyResult<()> {
         let mut progress = PyProgress::new(callback);
         let inner = &mut self.inner;
-        py.detach(|| guard(|| with_field!(inner, g, g.optimize(steps, resume, &mut progress))))
-            .map_err(to_pyerr)
+        released(py, || {
+            with_field!(inner, g, g.optimize(steps, resume, &mut progress))
+        })
     }
 
     /// Adds painted Dirichlet points (input units) with weight rows.
@@ -318,15 +293,12 @@ impl PyGeometricField {
         let (q, w) = (q.as_array(), w.as_array());
         let wf: Vec<f64> = w.iter().copied().collect();
         let inner = &mut self.inner;
-        py.detach(|| {
-            guard(|| {
-                with_field!(inner, g, {
-                    let pts = points(&q);
-                    g.paint(&pts, &wf)
-                })
+        released(py, || {
+            with_field!(inner, g, {
+                let pts = points(&q);
+                g.paint(&pts, &wf)
             })
         })
-        .map_err(to_pyerr)
     }
 
     /// Weights and status at query points (input units).
@@ -337,9 +309,8 @@ impl PyGeometricField {
     ) -> PyResult<WeightsOut<'py>> {
         let q = q.as_array();
         let inner = &self.inner;
-        let (w, s) = py
-            .detach(|| guard(|| Ok(with_field!(inner, g, g.evaluate(q)))))
-            .map_err(to_pyerr)?;
+        let mut progress = PyProgress::new(None);
+        let (w, s) = released(py, || with_field!(inner, g, g.evaluate(q, &mut progress)))?;
         Ok((w.into_pyarray(py), s.into_pyarray(py)))
     }
 
@@ -356,17 +327,13 @@ impl PyGeometricField {
         let ne = index_array(&normal_elems, n, "F")?;
         let ad = index_array(&adj, n, "F")?;
         let inner = &self.inner;
-        let (w, s) = py
-            .detach(|| {
-                guard(|| {
-                    Ok(with_field!(
-                        inner,
-                        g,
-                        g.vertex_weights(v, ne.view(), ad.view())
-                    ))
-                })
-            })
-            .map_err(to_pyerr)?;
+        let (w, s) = released(py, || {
+            Ok(with_field!(
+                inner,
+                g,
+                g.vertex_weights(v, ne.view(), ad.view())
+            ))
+        })?;
         Ok((w.into_pyarray(py), s.into_pyarray(py)))
     }
 
@@ -381,9 +348,7 @@ impl PyGeometricField {
         let (n, k) = fa.dim();
         let flat: Vec<f64> = fa.iter().copied().collect();
         let inner = &mut self.inner;
-        let (e, g) = py
-            .detach(|| guard(|| with_field!(inner, g, g.energy_at(&flat, step))))
-            .map_err(to_pyerr)?;
+        let (e, g) = released(py, || with_field!(inner, g, g.energy_at(&flat, step)))?;
         let g =
             Array2::from_shape_vec((n, k), g).map_err(|e| PyValueError::new_err(e.to_string()))?;
         Ok((e, g.into_pyarray(py)))

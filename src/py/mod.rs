@@ -1,10 +1,13 @@
 //! PyO3 bindings: argument conversion, GIL release, progress and error mapping. No numerics here;
 //! each capability has one file that wraps its Rust functions.
 
+use std::cell::RefCell;
+use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::time::{Duration, Instant};
 
 use ndarray::Array2;
 use numpy::{IntoPyArray, PyArray1, PyReadonlyArray2};
+use pyo3::create_exception;
 use pyo3::exceptions::{PyKeyboardInterrupt, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 
@@ -19,12 +22,55 @@ mod operators;
 mod reduce;
 mod skin;
 
+create_exception!(
+    skinrs,
+    InternalError,
+    PyRuntimeError,
+    "A bug in skinrs (a Rust panic caught at the binding layer), not a problem with the inputs."
+);
+
+thread_local! {
+    /// The exception a progress callback raised, re-raised unchanged once the computation has
+    /// stopped (so a `KeyboardInterrupt` or the user's own exception type reaches the caller).
+    static CALLBACK_ERROR: RefCell<Option<PyErr>> = const { RefCell::new(None) };
+}
+
 /// Maps the crate's error to the Python exception the user should see.
 pub(crate) fn to_pyerr(e: SkinError) -> PyErr {
     match e {
         SkinError::InvalidInput(s) => PyValueError::new_err(s),
-        SkinError::Interrupted => PyKeyboardInterrupt::new_err("skinrs computation interrupted"),
+        SkinError::Interrupted => CALLBACK_ERROR
+            .with(|c| c.borrow_mut().take())
+            .unwrap_or_else(|| PyKeyboardInterrupt::new_err("skinrs computation interrupted")),
         SkinError::Numerical(s) => PyRuntimeError::new_err(s),
+    }
+}
+
+/// The exception for a Rust panic: a bug in skinrs, with what to report.
+fn panic_to_pyerr(p: Box<dyn std::any::Any + Send>) -> PyErr {
+    let msg = p
+        .downcast_ref::<String>()
+        .cloned()
+        .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
+        .unwrap_or_else(|| "unknown panic".into());
+    InternalError::new_err(format!(
+        "internal error in skinrs: {msg}. This is a bug in skinrs, not in your data; please \
+         report it on the skinrs issue tracker with the skinrs version and a script (or the \
+         arrays saved with numpy.save) that reproduces it. The Python process is unaffected."
+    ))
+}
+
+/// Runs `f` with the GIL released: the crate's errors become Python exceptions and a panic
+/// becomes [`InternalError`] instead of unwinding into Python. Every binding's work goes
+/// through here.
+pub(crate) fn released<T, F>(py: Python<'_>, f: F) -> PyResult<T>
+where
+    F: FnOnce() -> SkinResult<T> + Send,
+    T: Send,
+{
+    match py.detach(|| catch_unwind(AssertUnwindSafe(f))) {
+        Ok(r) => r.map_err(to_pyerr),
+        Err(p) => Err(panic_to_pyerr(p)),
     }
 }
 
@@ -94,6 +140,7 @@ pub(crate) struct PyProgress {
 
 impl PyProgress {
     pub(crate) fn new(callback: Option<Py<PyAny>>) -> Self {
+        CALLBACK_ERROR.with(|c| c.borrow_mut().take());
         let every = Duration::from_millis(100);
         PyProgress {
             callback,
@@ -110,12 +157,16 @@ impl Progress for PyProgress {
         }
         self.last = Instant::now();
         Python::attach(|py| {
-            py.check_signals().map_err(|_| SkinError::Interrupted)?;
+            py.check_signals().map_err(|e| {
+                CALLBACK_ERROR.with(|c| *c.borrow_mut() = Some(e));
+                SkinError::Interrupted
+            })?;
             if let Some(cb) = &self.callback {
                 let r = cb
                     .call1(py, (event.stage, event.iteration, event.value))
                     .map_err(|e| {
-                        SkinError::InvalidInput(format!("progress callback raised: {e}"))
+                        CALLBACK_ERROR.with(|c| *c.borrow_mut() = Some(e));
+                        SkinError::Interrupted
                     })?;
                 if let Ok(false) = r.extract::<bool>(py) {
                     return Err(SkinError::Interrupted);
@@ -131,6 +182,7 @@ fn _skinrs(m: &Bound<'_, PyModule>) -> PyResult<()> {
     // Sparse factorisations run single-threaded: on small machines two threads were slower;
     // rayon parallelism is used for assembly and independent work instead.
     faer::set_global_parallelism(faer::Par::Seq);
+    m.add("InternalError", m.py().get_type::<InternalError>())?;
     operators::register(m)?;
     bbw::register(m)?;
     skin::register(m)?;

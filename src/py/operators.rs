@@ -6,7 +6,7 @@ use numpy::{IntoPyArray, PyArray1, PyReadonlyArray2};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
-use super::{index_array, sparse_out, to_pyerr, SparseParts};
+use super::{index_array, released, sparse_out, SparseParts};
 use crate::operators::{self, MassKind};
 
 fn mass_kind(kind: &str) -> PyResult<MassKind> {
@@ -27,9 +27,7 @@ fn _cotan_laplacian<'py>(
 ) -> PyResult<SparseParts<'py>> {
     let vv = v.as_array();
     let ff = index_array(&f, vv.nrows(), "F")?;
-    let l = py
-        .detach(|| operators::cotan_laplacian(vv, ff.view()))
-        .map_err(to_pyerr)?;
+    let l = released(py, || operators::cotan_laplacian(vv, ff.view()))?;
     Ok(sparse_out(py, &l))
 }
 
@@ -43,9 +41,7 @@ fn _massmatrix<'py>(
     let kind = mass_kind(kind)?;
     let vv = v.as_array();
     let ff = index_array(&f, vv.nrows(), "F")?;
-    let m = py
-        .detach(|| operators::massmatrix(vv, ff.view(), kind))
-        .map_err(to_pyerr)?;
+    let m = released(py, || operators::massmatrix(vv, ff.view(), kind))?;
     Ok(m.into_pyarray(py))
 }
 
@@ -59,9 +55,7 @@ fn _biharmonic_matrix<'py>(
     let kind = mass_kind(kind)?;
     let vv = v.as_array();
     let ff = index_array(&f, vv.nrows(), "F")?;
-    let b = py
-        .detach(|| operators::biharmonic_matrix(vv, ff.view(), kind))
-        .map_err(to_pyerr)?;
+    let b = released(py, || operators::biharmonic_matrix(vv, ff.view(), kind))?;
     Ok(sparse_out(py, &b))
 }
 
@@ -72,7 +66,7 @@ fn _connected_components<'py>(
     f: PyReadonlyArray2<'py, i64>,
 ) -> PyResult<(usize, Bound<'py, PyArray1<i64>>)> {
     let ff = index_array(&f, n, "F")?;
-    let (count, labels) = py.detach(|| operators::connected_components(n, ff.view()));
+    let (count, labels) = released(py, || Ok(operators::connected_components(n, ff.view())))?;
     let labels: Vec<i64> = labels.into_iter().map(|x| x as i64).collect();
     Ok((count, labels.into_pyarray(py)))
 }

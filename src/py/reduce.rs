@@ -9,7 +9,7 @@ use numpy::{
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
-use super::{index_array, to_pyerr, weights_view, PyProgress};
+use super::{index_array, released, to_pyerr, weights_view, PyProgress};
 use crate::reduce::{self, qp, Energy, Method, Poses, ReduceOptions, Solver};
 
 fn poses<'a>(
@@ -93,20 +93,18 @@ fn reduce_weights<'py>(
         solver,
     };
     let mut progress = PyProgress::new(callback);
-    let r = py
-        .detach(|| {
-            reduce::reduce_weights(
-                w,
-                k,
-                method,
-                v,
-                f.as_ref().map(|f| f.view()),
-                p.as_ref(),
-                &opts,
-                &mut progress,
-            )
-        })
-        .map_err(to_pyerr)?;
+    let r = released(py, || {
+        reduce::reduce_weights(
+            w,
+            k,
+            method,
+            v,
+            f.as_ref().map(|f| f.view()),
+            p.as_ref(),
+            &opts,
+            &mut progress,
+        )
+    })?;
     Ok((
         usize_to_i64(r.indices).into_pyarray(py),
         r.weights.into_pyarray(py),
@@ -131,7 +129,7 @@ fn reduce_deform<'py>(
     let p = required_poses(&control_points, &bone_transforms)?;
     let w = weights_view(&weights, &indices);
     let v = v.as_array();
-    let x = py.detach(|| reduce::deform(v, &w, &p)).map_err(to_pyerr)?;
+    let x = released(py, || reduce::deform(v, &w, &p))?;
     Ok(x.into_pyarray(py))
 }
 
@@ -151,9 +149,7 @@ fn reduce_transform_normals<'py>(
     let idx = index_array(&indices, p.handles(), "indices")?;
     let (nrm, w) = (normals.as_array(), weights.as_array());
     let c = c.as_ref().map(|c| c.as_array());
-    let x = py
-        .detach(|| reduce::transform_normals(nrm, idx.view(), w, &p, c))
-        .map_err(to_pyerr)?;
+    let x = released(py, || reduce::transform_normals(nrm, idx.view(), w, &p, c))?;
     Ok(x.into_pyarray(py))
 }
 
@@ -169,9 +165,7 @@ fn reduce_deformation_errors<'py>(
 ) -> PyResult<ErrorsOut<'py>> {
     let (full, approx) = (full.as_array(), approx.as_array());
     let f = index_array(&f, full.shape()[1], "F")?;
-    let e = py
-        .detach(|| reduce::deformation_errors(f.view(), full, approx))
-        .map_err(to_pyerr)?;
+    let e = released(py, || reduce::deformation_errors(f.view(), full, approx))?;
     Ok((
         e.normal_angle.into_pyarray(py),
         e.normal_rms,

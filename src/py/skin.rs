@@ -12,7 +12,7 @@ use numpy::{
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
-use super::{index_array, to_pyerr, weights_view};
+use super::{index_array, released, weights_view};
 use crate::skin;
 
 type Deformed<'py> = (Bound<'py, PyArray2<f64>>, Option<Bound<'py, PyArray2<f64>>>);
@@ -54,11 +54,10 @@ fn skin_any<'py>(
         }
         let o = guard.as_array_mut();
         let no = nout.as_mut().map(|a| a.view_mut());
-        py.detach(|| match method {
+        released(py, || match method {
             Method::Lbs => skin::lbs_into(v, &weights, t, n, o, no),
             Method::Dqs => skin::dqs_into(v, &weights, t, n, o, no),
-        })
-        .map_err(to_pyerr)?;
+        })?;
     }
     Ok((out, nout.map(|a| a.into_pyarray(py))))
 }
@@ -107,7 +106,8 @@ fn forward_kinematics<'py>(
 ) -> PyResult<Bound<'py, PyArray3<f64>>> {
     let c = C.as_array();
     let be = index_array(&BE, c.nrows(), "BE")?;
-    let t = skin::forward_kinematics(c, be.view(), Q.as_array()).map_err(to_pyerr)?;
+    let q = Q.as_array();
+    let t = released(py, || skin::forward_kinematics(c, be.view(), q))?;
     Ok(t.into_pyarray(py))
 }
 
@@ -119,7 +119,7 @@ fn bone_parents<'py>(
     n_joints: usize,
 ) -> PyResult<Bound<'py, PyArray1<i64>>> {
     let be = index_array(&BE, n_joints, "BE")?;
-    let p = skin::bone_parents(be.view(), n_joints).map_err(to_pyerr)?;
+    let p = released(py, || skin::bone_parents(be.view(), n_joints))?;
     let p: Vec<i64> = p.iter().map(|q| q.map_or(-1, |b| b as i64)).collect();
     Ok(p.into_pyarray(py))
 }
@@ -133,9 +133,7 @@ fn per_vertex_normals<'py>(
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
     let v = V.as_array();
     let f = index_array(&F, v.nrows(), "F")?;
-    let n = py
-        .detach(|| skin::per_vertex_normals(v, f.view()))
-        .map_err(to_pyerr)?;
+    let n = released(py, || skin::per_vertex_normals(v, f.view()))?;
     Ok(n.into_pyarray(py))
 }
 

@@ -10,7 +10,9 @@ use super::blend::{
     Lanes,
 };
 use super::quat::{cross, from_matrix, Quat};
-use super::{explain_nonfinite, outputs, slice_of, standard2, transform_blocks, Weights};
+use super::{
+    check_normals, explain_nonfinite, outputs, slice_of, standard2, transform_blocks, Weights,
+};
 use crate::error::SkinResult;
 use crate::invalid;
 
@@ -66,6 +68,7 @@ pub fn dqs_into(
     let table = dual_quaternions(t)?;
     let (n, m) = (v.nrows(), table.len());
     w.check(n, m)?;
+    check_normals(normals.as_ref(), n, 3)?;
     let vs = standard2(v);
     let vsl = slice_of(&vs)?;
     let ns = normals.map(standard2);

@@ -6,6 +6,8 @@
 //! `T_b = T_parent(b) o (x -> dQ_b (x - r_b) + r_b)`, i.e. `Q_b = Q_p dQ_b` and
 //! `t_b = t_p + Q_p r_b - Q_b r_b`.
 
+use std::collections::HashMap;
+
 use ndarray::{Array3, ArrayView2};
 
 use super::quat::{mul, norm, rotate, to_matrix, Quat};
@@ -25,7 +27,8 @@ pub fn bone_parents(be: ArrayView2<'_, usize>, n_joints: usize) -> SkinResult<Ve
         return invalid!("BE must have 2 columns, got shape {:?}", be.dim());
     }
     let m = be.nrows();
-    let mut ends_at: Vec<Option<usize>> = vec![None; n_joints];
+    // Keyed by joint: memory follows the bones, not `n_joints` (which the caller chooses).
+    let mut ends_at: HashMap<usize, usize> = HashMap::with_capacity(m);
     for b in 0..m {
         let (s, e) = (be[[b, 0]], be[[b, 1]]);
         if s >= n_joints || e >= n_joints {
@@ -34,26 +37,40 @@ pub fn bone_parents(be: ArrayView2<'_, usize>, n_joints: usize) -> SkinResult<Ve
         if s == e {
             return invalid!("BE row {b} joins joint {s} to itself");
         }
-        if let Some(other) = ends_at[e] {
+        if let Some(&other) = ends_at.get(&e) {
             return invalid!(
                 "joint {e} is the child end of bones {other} and {b}: a skeleton tree gives each \
                  joint at most one parent bone (check the edge directions of BE)"
             );
         }
-        ends_at[e] = Some(b);
+        ends_at.insert(e, b);
     }
-    let parent: Vec<Option<usize>> = (0..m).map(|b| ends_at[be[[b, 0]]]).collect();
-    // A cycle shows up as a parent chain longer than the number of bones.
-    for b in 0..m {
-        let (mut p, mut steps) = (parent[b], 0);
-        while let Some(q) = p {
-            steps += 1;
-            if steps > m {
-                return invalid!(
-                    "BE has a cycle through bone {b}; bones must form a tree or forest"
-                );
+    let parent: Vec<Option<usize>> = (0..m).map(|b| ends_at.get(&be[[b, 0]]).copied()).collect();
+    // Walk each parent chain once (linear in m): meeting a bone of the current walk is a cycle.
+    const NEW: u8 = 0;
+    const WALKING: u8 = 1;
+    const DONE: u8 = 2;
+    let mut state = vec![NEW; m];
+    let mut walk = Vec::new();
+    for b0 in 0..m {
+        let mut b = Some(b0);
+        while let Some(q) = b {
+            match state[q] {
+                DONE => break,
+                WALKING => {
+                    return invalid!(
+                        "BE has a cycle through bone {q}; bones must form a tree or forest"
+                    )
+                }
+                _ => {
+                    state[q] = WALKING;
+                    walk.push(q);
+                    b = parent[q];
+                }
             }
-            p = parent[q];
+        }
+        for q in walk.drain(..) {
+            state[q] = DONE;
         }
     }
     Ok(parent)

@@ -11,7 +11,9 @@ use super::blend::{
     blend, first_nonfinite, has_avx2, par_chunks, to_skin_error, ChunkError, Held, Influences,
     Lanes,
 };
-use super::{explain_nonfinite, outputs, slice_of, standard2, transform_blocks, Weights};
+use super::{
+    check_normals, explain_nonfinite, outputs, slice_of, standard2, transform_blocks, Weights,
+};
 use crate::error::SkinResult;
 use crate::invalid;
 
@@ -82,6 +84,7 @@ fn run<const D: usize>(
     let table = transform_blocks::<D>(t)?;
     let (n, m) = (v.nrows(), table.len());
     w.check(n, m)?;
+    check_normals(normals.as_ref(), n, D)?;
     let vs = standard2(v);
     let vsl = slice_of(&vs)?;
     let ns = normals.map(standard2);

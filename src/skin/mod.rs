@@ -155,6 +155,20 @@ pub(crate) fn explain_nonfinite(
     SkinError::InvalidInput(msg)
 }
 
+/// Checks that the rest normals, when given, have one row of `d` entries per vertex.
+pub(crate) fn check_normals(
+    normals: Option<&ArrayView2<'_, f64>>,
+    n: usize,
+    d: usize,
+) -> SkinResult<()> {
+    match normals {
+        Some(a) if a.dim() != (n, d) => {
+            invalid!("N must have shape ({n}, {d}) like V, got {:?}", a.dim())
+        }
+        _ => Ok(()),
+    }
+}
+
 /// Checks the output arrays of a skinning call and returns them as flat slices.
 /// `want_normals` says whether normals were given (then `nout` is required).
 pub(crate) fn outputs<'a, 'b>(
@@ -175,7 +189,10 @@ pub(crate) fn outputs<'a, 'b>(
         (None, false) => None,
         (Some(nv), true) => {
             if nv.dim() != (n, d) {
-                return invalid!("N must have shape ({n}, {d}) like V, got {:?}", nv.dim());
+                return invalid!(
+                    "the normals output must have shape ({n}, {d}), got {:?}",
+                    nv.dim()
+                );
             }
             match nv.into_slice() {
                 Some(s) => Some(s),

@@ -31,6 +31,7 @@ pub fn per_vertex_normals(
     if let Some(&bad) = f.iter().find(|&&i| i >= n) {
         return invalid!("F holds index {bad}, outside 0..{n}");
     }
+    crate::limits::check_coordinates("V", &v)?;
     let p = |i: usize| [v[[i, 0]], v[[i, 1]], v[[i, 2]]];
     let face: Vec<[f64; 3]> = (0..f.nrows())
         .into_par_iter()
@@ -53,8 +54,11 @@ pub fn per_vertex_normals(
     }
     if let Some(flat) = acc.as_slice_mut() {
         flat.par_chunks_mut(3).for_each(|row| {
-            let len = (row[0] * row[0] + row[1] * row[1] + row[2] * row[2]).sqrt();
-            if len > 0.0 {
+            // Divide by the largest entry first so the squared length cannot overflow.
+            let big = row.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+            if big > 0.0 && big.is_finite() {
+                row.iter_mut().for_each(|x| *x /= big);
+                let len = (row[0] * row[0] + row[1] * row[1] + row[2] * row[2]).sqrt();
                 row.iter_mut().for_each(|x| *x /= len);
             }
         });
