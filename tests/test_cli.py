@@ -45,9 +45,7 @@ def arm(data_dir):
 def arm_glb(tmp_path_factory, arm):
     """``skinrs weights arm.obj arm.tgf -o arm.glb`` (the README's example), run once."""
     out = tmp_path_factory.mktemp("cli") / "arm.glb"
-    t0 = time.perf_counter()
     run = skinrs_cli("weights", arm / "arm.obj", arm / "arm.tgf", "-o", out)
-    print(f"skinrs weights arm.obj arm.tgf -o arm.glb: {time.perf_counter() - t0:.1f} s")
     assert run.returncode == 0, run.stderr
     return out
 
@@ -75,6 +73,7 @@ def test_help_on_every_command():
     assert run.returncode == 0 and all(c in run.stdout for c in COMMANDS)
 
 
+@pytest.mark.slow  # (the arm's weights: 15-20 s)
 def test_weights_of_the_arm_as_a_glb(arm, arm_glb):
     a = read_gltf(arm_glb)
     V, F = skinrs.io.read_obj(arm / "arm.obj")
@@ -105,6 +104,7 @@ def test_weights_from_other_formats_and_to_weight_files(capsule, tmp_path):
     assert Ws.shape == (len(V), 2) and np.abs(Ws.sum(1) - 1).max() <= 1e-9
 
 
+@pytest.mark.slow
 def test_weights_with_k_influences_and_the_field_method(capsule, tmp_path):
     d, V = capsule
     run = skinrs_cli(
@@ -122,6 +122,28 @@ def test_weights_with_k_influences_and_the_field_method(capsule, tmp_path):
     W = skinrs.io.read_dmat(tmp_path / "f.dmat")
     assert W.shape == (len(V), 2) and np.abs(W.sum(1) - 1).max() <= 1e-9
     assert W.min() >= 0  # (12 steps: plumbing only; tests/test_field.py checks the weights)
+
+
+def test_weights_of_a_glb_keep_its_joints_and_pose_from_a_file(capsule, tmp_path):
+    d, _ = capsule
+    first, again = tmp_path / "capsule.glb", tmp_path / "again.gltf"
+    run = skinrs_cli("weights", d / "capsule.off", d / "capsule.tgf", "-o", first)
+    assert run.returncode == 0, run.stderr
+    run = skinrs_cli("weights", first, "-o", again)  # the skeleton comes from the skin
+    assert run.returncode == 0, run.stderr
+    a, b = read_gltf(first), read_gltf(again)
+    assert b["joints"]["names"] == a["joints"]["names"] == ["bone0", "bone1", "bone1_end"]
+    assert np.abs(b["joints"]["bind"] - a["joints"]["bind"]).max() <= 1e-6
+    # solved again on the float32 positions of the file (TetGen meshes the inside differently)
+    assert b["W"].shape == a["W"].shape and np.abs(b["W"].sum(1) - 1).max() <= 1e-6
+    assert (b["W"][b["V"][:, 0] > 0.8].argmax(1) == 1).all()
+    T = skinrs.forward_kinematics(a["C"], a["BE"], [[1.0, 0, 0, 0], [0.8, 0, 0, 0.6]])
+    np.save(tmp_path / "pose.npy", T)
+    run = skinrs_cli("pose", first, "--pose", tmp_path / "pose.npy", "-o", tmp_path / "p.png")
+    assert run.returncode == 0 and (tmp_path / "p.png").stat().st_size > 1000, run.stderr
+    np.save(tmp_path / "bad.npy", T[:1])
+    run = skinrs_cli("pose", first, "--pose", tmp_path / "bad.npy", "-o", tmp_path / "q.png")
+    assert_one_line_error(run, "expected 2 bones")
 
 
 def test_reduce(capsule, tmp_path):
@@ -145,6 +167,7 @@ def test_reduce(capsule, tmp_path):
     assert_one_line_error(run, "--method poisson needs --mesh and --skeleton")
 
 
+@pytest.mark.slow  # (the arm's weights: 15-20 s)
 def test_pose_writes_a_picture(arm, arm_glb, tmp_path):
     for pose, extra in (("random:1", []), ("random:2", ["--dqs"])):
         out = tmp_path / f"{pose.replace(':', '')}.png"
@@ -157,6 +180,7 @@ def test_pose_writes_a_picture(arm, arm_glb, tmp_path):
     assert_one_line_error(run, "not a skinned glTF asset")
 
 
+@pytest.mark.slow  # (the arm's weights: 15-20 s)
 def test_info(arm, arm_glb):
     run = skinrs_cli("info", arm / "arm.obj", arm / "arm.tgf", "--json")
     assert run.returncode == 0, run.stderr
@@ -196,7 +220,10 @@ def test_ctrl_c_exits_130_and_writes_nothing(arm, tmp_path):
         stderr=subprocess.PIPE,
         text=True,
     )
-    time.sleep(4)
+    for line in proc.stderr:  # wait until the work has started
+        if "meshing" in line:
+            break
+    time.sleep(1)
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 130, err

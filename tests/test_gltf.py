@@ -128,8 +128,7 @@ def test_blender_poses_the_glb_like_lbs(arm, tmp_path):
     for t, T in ((0.5, poses[1]), (1.0, poses[2])):
         U_blender = b["frames"][round(t * fps)][rows]
         deviation = np.linalg.norm(U_blender - skinrs.lbs(V, packed, T), axis=1).max() / diag
-        print(f"Blender vs skinrs.lbs at t = {t} s: max deviation {deviation:.2e} x diagonal")
-        assert deviation <= 1e-4
+        assert deviation <= 1e-4  # measured: 2.5e-7 and 5.7e-7 (float32 in the file)
     names = list(b["names"])
     for k, (h, t) in enumerate(BE):  # one Blender bone per column, head and tail as in skinrs
         j = names.index(f"bone{k}")
