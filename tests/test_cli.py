@@ -146,6 +146,22 @@ def test_weights_of_a_glb_keep_its_joints_and_pose_from_a_file(capsule, tmp_path
     assert_one_line_error(run, "expected 2 bones")
 
 
+def test_weights_of_a_tet_mesh_make_an_asset_of_its_surface(data_dir, tmp_path):
+    d = data_dir / "decimated-knight"
+    out = tmp_path / "knight.glb"
+    run = skinrs_cli("weights", d / "decimated-knight.mesh", d / "decimated-knight.tgf", "-o", out)
+    assert run.returncode == 0, run.stderr
+    V, T, F = skinrs.io.read_mesh(d / "decimated-knight.mesh")
+    C, BE = skinrs.io.read_tgf(d / "decimated-knight.tgf")
+    a = read_gltf(out)
+    used = np.unique(F)
+    assert np.abs(a["V"] - V[used]).max() <= 1e-5 and len(a["V"]) == 1774
+    assert ((a["W"] > 0).sum(1) <= 4).all() and np.abs(a["W"].sum(1) - 1).max() <= 1e-6
+    W = skinrs.bbw_dual(V, T, C, BE=BE, tol=1e-6)[used]
+    clear = W.max(1) > 0.6  # where one bone dominates, the packed weights agree on which
+    assert (a["W"][clear].argmax(1) == W[clear].argmax(1)).all()
+
+
 def test_reduce(capsule, tmp_path):
     d, V = capsule
     W = np.random.default_rng(0).random((len(V), 2))

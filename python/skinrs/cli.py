@@ -170,7 +170,7 @@ class Progress:
         return
 
     def close(self):
-        if self.bar:
+        if self.bar is not None and self.bar is not False:
             self.bar.close()
 
 
@@ -239,6 +239,9 @@ def cmd_weights(args) -> None:
     if out_ext in (".glb", ".gltf"):
         if F is None:
             raise UsageError(f"{args.output}: a glTF mesh needs faces; {args.mesh} has none")
+        if mesh["T"] is not None:  # a tet mesh: the asset is its boundary surface
+            used = np.unique(F)
+            V, F, W = V[used], np.searchsorted(used, F), W[used]
         with atomic_output(args.output) as tmp:
             gltf.write_gltf(tmp, V, F, W, C, BE, P, k=args.influences or 4,
                             method=args.reduce_method, asset=asset)  # fmt: skip
@@ -287,7 +290,7 @@ def cmd_reduce(args) -> None:
             f"--method {args.method} needs {' and '.join(missing)} (or use --method k-largest)"
         )
     poses = _example_poses(args.method, C, BE, P) if C is not None else None
-    prog = Progress(args.quiet, 0, "sweep", lambda it, v: it)
+    prog = Progress(args.quiet, None, "sweep", lambda it, v: it)
     try:
         I, A = reduce_weights(W, args.k, args.method, V=V, F=F, bone_transforms=poses,
                               callback=prog)  # fmt: skip
@@ -465,4 +468,10 @@ def main(argv=None) -> int:
             raise
         print(f"skinrs {args.command}: error: {e}", file=sys.stderr)
         return 2
+    except Exception as e:  # a bug: one line here, the traceback with --debug
+        if args.debug:
+            raise
+        print(f"skinrs {args.command}: internal error: {type(e).__name__}: {e} (rerun with "
+              "--debug for the traceback)", file=sys.stderr)  # fmt: skip
+        return 1
     return 0
