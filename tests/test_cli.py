@@ -60,6 +60,7 @@ def capsule(tmp_path_factory):
     mesh.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, [0, 1, 0]))
     for ext in ("off", "ply", "stl"):
         mesh.export(d / f"capsule.{ext}")
+    trimesh.PointCloud(mesh.vertices).export(d / "cloud.ply")
     skinrs.io.write_tgf(d / "capsule.tgf", [[-0.7, 0, 0], [0, 0, 0], [0.7, 0, 0]], [[0, 1], [1, 2]])
     return d, np.asarray(mesh.vertices)
 
@@ -104,8 +105,7 @@ def test_weights_from_other_formats_and_to_weight_files(capsule, tmp_path):
     assert Ws.shape == (len(V), 2) and np.abs(Ws.sum(1) - 1).max() <= 1e-9
 
 
-@pytest.mark.slow
-def test_weights_with_k_influences_and_the_field_method(capsule, tmp_path):
+def test_weights_with_k_influences(capsule, tmp_path):
     d, V = capsule
     run = skinrs_cli(
         "weights", d / "capsule.off", d / "capsule.tgf", "-k", "1", "--reduce-method",
@@ -114,8 +114,15 @@ def test_weights_with_k_influences_and_the_field_method(capsule, tmp_path):
     assert run.returncode == 0, run.stderr
     with np.load(tmp_path / "w.npz") as z:
         assert z["indices"].shape == (len(V), 1) and ((z["W"] > 0).sum(1) == 1).all()
+
+
+@pytest.mark.slow  # (the field's point set: ~5 s of CPU even for 12 steps)
+def test_weights_of_a_point_cloud_with_the_field_method(capsule, tmp_path):
+    d, V = capsule
+    run = skinrs_cli("weights", d / "cloud.ply", d / "capsule.tgf", "-o", tmp_path / "f.dmat")
+    assert_one_line_error(run, "use --method field")
     run = skinrs_cli(
-        "weights", d / "capsule.off", d / "capsule.tgf", "--method", "field", "--steps", "12",
+        "weights", d / "cloud.ply", d / "capsule.tgf", "--method", "field", "--steps", "12",
         "-o", tmp_path / "f.dmat",
     )  # fmt: skip
     assert run.returncode == 0, run.stderr
