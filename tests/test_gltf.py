@@ -299,6 +299,8 @@ def test_bad_input_is_named(arm, tmp_path):
         write_gltf(
             tmp_path / "a.glb", V, F, (np.zeros((len(V), 1), int), -np.ones((len(V), 1))), C, BE
         )
+    with pytest.raises(ValueError, match="6 influences per vertex, more than k = 4"):
+        write_gltf(tmp_path / "a.glb", V, F, skinrs.reduce_weights(W, 6, "k-largest"), C, BE)
     with pytest.raises(ValueError, match="poses must have shape"):
         write_gltf(tmp_path / "a.glb", V, F, W, C, BE, poses=np.zeros((2, 3, 3, 4)))
     assert not (tmp_path / "a.glb").exists()

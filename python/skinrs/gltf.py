@@ -51,7 +51,7 @@ class _Blob:
     def __init__(self, g, lib):
         self.g, self.lib, self.data = g, lib, bytearray()
 
-    def add(self, A, target=None, minmax=False, normalized=False) -> int:
+    def add(self, A, target=None, minmax=False) -> int:
         A = np.ascontiguousarray(A)
         self.data += b"\0" * (-len(self.data) % 4)
         self.g.bufferViews.append(
@@ -66,7 +66,6 @@ class _Blob:
             componentType=_CODES[A.dtype],
             count=len(A),
             type=_TYPES[flat.shape[1]],
-            normalized=normalized or None,
         )
         if minmax:
             acc.min, acc.max = flat.min(0).tolist(), flat.max(0).tolist()
@@ -79,10 +78,12 @@ def _pack(W, k, method, V, F, C, BE, P, poses):
     if isinstance(W, tuple):
         I = np.asarray(W[0], dtype=np.int64)
         A = np.asarray(W[1], dtype=np.float64)
-        if I.ndim != 2 or I.shape != A.shape or I.shape[1] > 8:
+        if I.ndim != 2 or I.shape != A.shape:
             raise ValueError(
-                f"packed W must be (indices, weights) of shape (n, <= 8), got {I.shape}"
+                f"packed W must be (indices, weights) of one shape (n, j), got {I.shape}"
             )
+        if I.shape[1] > k:
+            raise ValueError(f"packed W has {I.shape[1]} influences per vertex, more than k = {k}")
         return I, A
     from .reduce import random_skeleton_poses, reduce_weights
 
@@ -109,7 +110,7 @@ def _joint_weights(I, A, column_joint, n_joints):
     s = dense.sum(1)
     if np.any(s <= 0):
         raise ValueError(f"vertex {int(np.flatnonzero(s <= 0)[0])} has no weight")
-    k = 4 if I.shape[1] <= 4 else 8
+    k = 4 if I.shape[1] <= 4 else 8  # a vertex has at most I.shape[1] joints
     order = np.argsort(-dense, axis=1, kind="stable")[:, :k]
     Wk = np.take_along_axis(dense, order, 1) / s[:, None]
     Jk = np.where(Wk > 0, order, 0)
@@ -180,34 +181,11 @@ def write_gltf(
     if k not in (4, 8):
         raise ValueError(f"k must be 4 or 8 (glTF stores influences in groups of 4), got {k!r}")
     if asset is not None:
-        j = asset["joints"]
         C, BE, P = asset["C"], asset["BE"], asset["P"]
-        jnames, parents, bind, column_joint = j["names"], j["parents"], j["bind"], j["column"]
-        labels = j["labels"]
-        animations = j["animations"] if poses is None else []
+        rig_ = _asset_rig(asset, names, keep_animations=poses is None)
     else:
-        if C is None or BE is None:
-            raise ValueError("pass the skeleton C and BE (or asset= from read_gltf)")
-        C = as_points(C, "C", dims=(3,))
-        BE = as_index_array(BE, len(C), "BE", cols=2)
-        P = as_index_array([] if P is None else P, len(C), "P", ndim=1)
-        if np.any(np.linalg.norm(C[BE[:, 1]] - C[BE[:, 0]], axis=1) == 0):
-            raise ValueError("BE has a bone of zero length")
-        default = [f"handle{i}" for i in range(len(P))] + [f"bone{b}" for b in range(len(BE))]
-        if names is not None and len(names) != len(default):
-            raise ValueError(
-                f"names must have one entry per column ({len(default)}), got {len(names)}"
-            )
-        cols = default if names is None else [str(x) for x in names]
-        jnames, parents, bind, column_joint, labels = rig.skeleton_rig(C, BE, P, cols)
-        animations = []
-    m = len(column_joint)
-    if names is not None and asset is not None:
-        if len(names) != m:
-            raise ValueError(f"names must have one entry per column ({m}), got {len(names)}")
-        jnames = list(jnames)
-        for c, j in enumerate(column_joint):
-            jnames[j] = str(names[c])
+        C, BE, P, rig_ = _skeleton_rig(C, BE, P, names)
+    m = len(rig_["column"])
     if not isinstance(W, tuple):
         W = as_points(W, "W", dims=range(1, 1 << 30))
         if W.shape != (len(V), m):
@@ -216,19 +194,11 @@ def write_gltf(
             )
     if poses is not None:
         poses = np.asarray(poses, dtype=np.float64)
-        if poses.ndim != 4 or poses.shape[1:] != (m, 3, 4):
-            raise ValueError(f"poses must have shape (frames, {m}, 3, 4), got {poses.shape}")
-        t = np.arange(len(poses)) / 24.0 if times is None else np.asarray(times, dtype=float)
-        if t.shape != (len(poses),) or np.any(np.diff(t) <= 0):
-            raise ValueError(
-                f"times must be {len(poses)} increasing seconds, got {np.shape(times)}"
-            )
-        T = rig.joint_poses(poses, column_joint, parents, bind)
-        animations = [{"name": "skinrs", "times": t, "T": T}]
+        rig_["animations"] = [_animation(poses, times, rig_)]
     I, A = _pack(W, k, method, V, F, C, BE, P, poses)
     if I.size and (I.min() < 0 or I.max() >= m):
         raise ValueError(f"packed W refers to column {int(I.max())}, expected 0..{m - 1}")
-    joints, weights = _joint_weights(I, A, column_joint, len(parents))
+    joints, weights = _joint_weights(I, A, rig_["column"], len(rig_["parents"]))
 
     g = lib.GLTF2(asset=lib.Asset(version="2.0", generator="skinrs"))
     blob = _Blob(g, lib)
@@ -243,6 +213,70 @@ def write_gltf(
     idx = F.astype(np.uint16 if len(V) < 65536 else np.uint32).reshape(-1)
     prim = lib.Primitive(attributes=attrs, indices=blob.add(idx, _ELEMENTS), mode=4)
     g.meshes.append(lib.Mesh(name="skinned", primitives=[prim]))
+    _write_skin(g, lib, blob, rig_)
+    g.scenes.append(lib.Scene(nodes=[0]))
+    g.scene = 0
+    g.buffers.append(lib.Buffer(byteLength=len(blob.data)))
+    g.set_binary_blob(bytes(blob.data))
+    if path.lower().endswith(".gltf"):
+        g.convert_buffers(lib.BufferFormat.DATAURI)
+        g.save_json(path)
+    else:
+        g.save_binary(path)
+
+
+def _skeleton_rig(C, BE, P, names):
+    """Checked ``C, BE, P`` and the joint nodes of a skinrs skeleton (one per column)."""
+    if C is None or BE is None:
+        raise ValueError("pass the skeleton C and BE (or asset= from read_gltf)")
+    C = as_points(C, "C", dims=(3,))
+    BE = as_index_array(BE, len(C), "BE", cols=2)
+    P = as_index_array([] if P is None else P, len(C), "P", ndim=1)
+    if np.any(np.linalg.norm(C[BE[:, 1]] - C[BE[:, 0]], axis=1) == 0):
+        raise ValueError("BE has a bone of zero length")
+    cols = [f"handle{i}" for i in range(len(P))] + [f"bone{b}" for b in range(len(BE))]
+    if names is not None:
+        if len(names) != len(cols):
+            raise ValueError(
+                f"names must have one entry per column ({len(cols)}), got {len(names)}"
+            )
+        cols = [str(x) for x in names]
+    jnames, parents, bind, column, labels = rig.skeleton_rig(C, BE, P, cols)
+    nodes = {"names": jnames, "parents": parents, "bind": bind, "column": column}
+    return C, BE, P, {**nodes, "labels": labels, "animations": []}
+
+
+def _asset_rig(asset, names, keep_animations):
+    """The joint nodes of an asset from :func:`read_gltf`, columns renamed by ``names``."""
+    j = asset["joints"]
+    out = {key: j[key] for key in ("names", "parents", "bind", "column", "labels")}
+    out["animations"] = list(j["animations"]) if keep_animations else []
+    if names is not None:
+        if len(names) != len(j["column"]):
+            raise ValueError(
+                f"names must have one entry per column ({len(j['column'])}), got {len(names)}"
+            )
+        out["names"] = list(out["names"])
+        for c, joint in enumerate(j["column"]):
+            out["names"][joint] = str(names[c])
+    return out
+
+
+def _animation(poses, times, rig_):
+    """Per-column poses (frames, m, 3, 4) as skinning transforms of every joint node."""
+    m = len(rig_["column"])
+    if poses.ndim != 4 or poses.shape[1:] != (m, 3, 4):
+        raise ValueError(f"poses must have shape (frames, {m}, 3, 4), got {poses.shape}")
+    t = np.arange(len(poses)) / 24.0 if times is None else np.asarray(times, dtype=float)
+    if t.shape != (len(poses),) or np.any(np.diff(t) <= 0):
+        raise ValueError(f"times must be {len(poses)} increasing seconds, got {np.shape(times)}")
+    T = rig.joint_poses(poses, rig_["column"], rig_["parents"], rig_["bind"])
+    return {"name": "skinrs", "times": t, "T": T}
+
+
+def _write_skin(g, lib, blob, rig_):
+    """Nodes (a root, the mesh, the joints), the skin and the animations."""
+    jnames, parents, bind, labels = rig_["names"], rig_["parents"], rig_["bind"], rig_["labels"]
     J0 = 2  # node 0: a common root (Panda3D needs one), node 1: the mesh, then the joints
     local = rig.local_matrices(parents, bind)
     roots = [J0 + j for j in range(len(parents)) if parents[j] < 0]
@@ -266,17 +300,8 @@ def write_gltf(
             skeleton=0,
         )
     )
-    for anim in animations:
+    for anim in rig_["animations"]:
         _write_animation(g, lib, blob, anim, parents, bind, jnames, J0)
-    g.scenes.append(lib.Scene(nodes=[0]))
-    g.scene = 0
-    g.buffers.append(lib.Buffer(byteLength=len(blob.data)))
-    g.set_binary_blob(bytes(blob.data))
-    if path.lower().endswith(".gltf"):
-        g.convert_buffers(lib.BufferFormat.DATAURI)
-        g.save_json(path)
-    else:
-        g.save_binary(path)
 
 
 def _write_animation(g, lib, blob, anim, parents, bind, jnames, J0):
