@@ -223,6 +223,7 @@ def test_bad_files_and_arguments(arm, tmp_path):
         (("weights", arm / "arm.obj", "-o", tmp_path / "o.glb"), "no skeleton"),
         (("weights", arm / "arm.obj", arm / "arm.obj", "-o", tmp_path / "o.glb"), "unknown skeleton format"),
         (("weights", tmp_path / "bad.obj", arm / "arm.tgf", "-o", tmp_path / "o.glb"), "out of range"),
+        (("weights", arm / "arm.obj", arm / "arm.tgf", "-k", "2", "-o", tmp_path / "o.glb"), "4 or 8"),
         (("info", tmp_path / "bad.glb"), "not a readable glTF"),
         (("info", arm / "arm.tgf"), "unknown mesh format"),
     ]  # fmt: skip

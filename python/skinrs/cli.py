@@ -190,27 +190,37 @@ def say(args, msg: str) -> None:
 
 
 def cmd_weights(args) -> None:
-    from . import gltf
-    from .field import GeometricField
-    from .meshing import skin_weights
-    from .reduce import reduce_weights
-
     out_ext = _ext(args.output)
     if out_ext not in (".glb", ".gltf") + WEIGHT_EXTS:
         raise UsageError(f"{args.output}: unknown output format {out_ext!r}")
+    if out_ext in (".glb", ".gltf") and args.influences not in (None, 4, 8):
+        raise UsageError(f"{args.output}: glTF stores 4 or 8 influences, not -k {args.influences}")
     mesh = read_any_mesh(args.mesh)
-    V, F, asset = mesh["V"], mesh["F"], mesh["asset"]
     if args.skeleton is not None:
         C, BE, P = read_skeleton(args.skeleton)
-        asset = None
-    elif asset is not None and len(asset["C"]):
-        C, BE, P = asset["C"], asset["BE"], asset["P"]
+        mesh["asset"] = None  # the new skeleton replaces a glTF's own
+    elif mesh["asset"] is not None and len(mesh["asset"]["C"]):
+        C, BE, P = mesh["asset"]["C"], mesh["asset"]["BE"], mesh["asset"]["P"]
     else:
         raise UsageError(f"{args.mesh}: no skeleton in the file; give a .tgf or RigNet .txt")
-    if F is None and args.method == "bbw":
+    if mesh["F"] is None and args.method == "bbw":
         raise UsageError(f"{args.mesh}: a point cloud has no faces; use --method field")
     t0 = time.perf_counter()
+    W = _solve_weights(args, mesh, C, BE, P)
+    say(
+        args,
+        f"weights: {W.shape[0]} vertices x {W.shape[1]} handles, {time.perf_counter() - t0:.1f} s",
+    )
+    _write_weights_output(args, mesh, W, C, BE, P)
+    say(args, f"wrote {args.output}")
+
+
+def _solve_weights(args, mesh, C, BE, P):
+    """BBW (on the tet mesh, or meshing a surface's inside) or a geometric field's weights."""
+    V, F = mesh["V"], mesh["F"]
     if args.method == "field":
+        from .field import GeometricField
+
         opts = {} if args.steps is None else {"steps": args.steps}
         fld = GeometricField(V, F, C, BE=BE if len(BE) else None, P=P if len(P) else None, **opts)
         prog = Progress(args.quiet, args.steps or 6000, "step", lambda it, v: it)
@@ -218,34 +228,39 @@ def cmd_weights(args) -> None:
             fld.optimize(callback=prog)
         finally:
             prog.close()
-        W = fld.vertex_weights()
-    else:
-        tol = args.tol if args.tol is not None else 1e-6
-        prog = Progress(args.quiet, 100.0, "%", gap_progress(tol))
-        try:
-            if mesh["T"] is not None:
-                from .bbw import bbw_dual
+        return fld.vertex_weights()
+    tol = args.tol if args.tol is not None else 1e-6
+    prog = Progress(args.quiet, 100.0, "%", gap_progress(tol))
+    try:
+        if mesh["T"] is not None:
+            from .bbw import bbw_dual
 
-                W = bbw_dual(V, mesh["T"], C, BE=BE, P=P, tol=tol, callback=prog)
-            else:
-                say(args, "meshing the inside with the skeleton (TetGen) ...")
-                W = skin_weights(V, F, C, BE, P, tol=tol, callback=prog)
-        finally:
-            prog.close()
-    say(
-        args,
-        f"weights: {W.shape[0]} vertices x {W.shape[1]} handles, {time.perf_counter() - t0:.1f} s",
-    )
-    if out_ext in (".glb", ".gltf"):
+            return bbw_dual(V, mesh["T"], C, BE=BE, P=P, tol=tol, callback=prog)
+        from .meshing import skin_weights
+
+        say(args, "meshing the inside with the skeleton (TetGen) ...")
+        return skin_weights(V, F, C, BE, P, tol=tol, callback=prog)
+    finally:
+        prog.close()
+
+
+def _write_weights_output(args, mesh, W, C, BE, P):
+    """A skinned glTF asset, or the weights (reduced to -k influences when asked)."""
+    V, F = mesh["V"], mesh["F"]
+    if _ext(args.output) in (".glb", ".gltf"):
+        from .gltf import write_gltf
+
         if F is None:
             raise UsageError(f"{args.output}: a glTF mesh needs faces; {args.mesh} has none")
         if mesh["T"] is not None:  # a tet mesh: the asset is its boundary surface
             used = np.unique(F)
             V, F, W = V[used], np.searchsorted(used, F), W[used]
         with atomic_output(args.output) as tmp:
-            gltf.write_gltf(tmp, V, F, W, C, BE, P, k=args.influences or 4,
-                            method=args.reduce_method, asset=asset)  # fmt: skip
+            write_gltf(tmp, V, F, W, C, BE, P, k=args.influences or 4,
+                       method=args.reduce_method, asset=mesh["asset"])  # fmt: skip
     elif args.influences:
+        from .reduce import reduce_weights
+
         needs_mesh = args.reduce_method in ("smooth", "poisson")
         packed = reduce_weights(W, min(args.influences, W.shape[1]), args.reduce_method,
                                 V=V, F=F if needs_mesh else None,
@@ -253,7 +268,6 @@ def cmd_weights(args) -> None:
         write_weights(args.output, io_unpack(packed, W.shape[1]), packed)
     else:
         write_weights(args.output, W)
-    say(args, f"wrote {args.output}")
 
 
 def io_unpack(packed, m):
