@@ -12,6 +12,7 @@ pub mod limits;
 pub mod operators;
 pub mod progress;
 pub mod reduce;
+pub mod rng;
 pub mod skin;
 pub mod sparse;
 

@@ -37,3 +37,17 @@ pub(crate) fn cholesky(a: &Csc) -> Result<Llt<usize, f64>, String> {
         .map_err(|e| format!("symbolic analysis: {e:?}"))?;
     Llt::try_new_with_symbolic(symbolic, a.as_ref(), Side::Lower).map_err(|e| format!("{e:?}"))
 }
+
+/// The tridiagonal `[-1 2 -1]` matrix of a path graph `0 - 1 - ... - (n-1)` (a test fixture).
+#[cfg(test)]
+pub(crate) fn path_matrix(n: usize) -> Csc {
+    let mut trip = Vec::new();
+    for i in 0..n {
+        trip.push(Triplet::new(i, i, 2.0));
+        if i + 1 < n {
+            trip.push(Triplet::new(i, i + 1, -1.0));
+            trip.push(Triplet::new(i + 1, i, -1.0));
+        }
+    }
+    from_triplets(n, n, &trip).unwrap()
+}

@@ -140,8 +140,7 @@ impl History {
 
     /// The two-loop recursion (Nocedal & Wright, Alg. 7.4), `d = -H g`. Each update of `d` is
     /// fused with the inner product the next step needs, so `d` is streamed once per stored
-    /// vector. (The compact form of Byrd, Nocedal & Schnabel reads the history in two passes
-    /// too and was no faster here: `d` stays in cache, the 20 stored vectors do not.)
+    /// vector.
     fn direction(&self, g: &[f64], d: &mut [f64]) {
         let k = self.s.len();
         let mut alpha = vec![0.0; k];

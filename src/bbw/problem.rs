@@ -8,7 +8,6 @@ use rayon::prelude::*;
 
 use crate::error::{SkinError, SkinResult};
 use crate::invalid;
-pub(crate) use crate::sparse::cholesky;
 use crate::sparse::{from_triplets, Csc, TreeLlt};
 
 /// The BBW quadratic restricted to the free vertices.

@@ -1,9 +1,9 @@
 //! Dense vector kernels for the `nf x m` blocks of the dual solvers, run on the rayon threads.
 //!
-//! On big2d (41k vertices, 8 handles) these vectors are 2.6 MB each and L-BFGS keeps 20 of
-//! them, so its bookkeeping streams from memory; done serially, it took more wall time than the
-//! sparse solves (which run on both cores). Each kernel does its work in one pass, and sums are
-//! reduced per chunk and then added in chunk order, so results do not depend on scheduling.
+//! At 40k vertices and 8 handles these vectors are 2.6 MB each and L-BFGS keeps 20 of them, so
+//! its bookkeeping streams from memory and, done serially, costs more wall time than the sparse
+//! solves (which run on all cores). Each kernel does its work in one pass, and sums are reduced
+//! per chunk and then added in chunk order, so results do not depend on scheduling.
 
 use rayon::prelude::*;
 

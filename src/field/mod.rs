@@ -25,7 +25,6 @@ pub mod grid;
 pub mod kernel;
 pub mod mollifier;
 pub mod optimize;
-pub mod rng;
 pub mod sampling;
 pub mod winding;
 

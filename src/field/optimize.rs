@@ -17,12 +17,12 @@ use super::adam::Adam;
 use super::energy::{McSample, Problem};
 use super::kernel::{FieldValue, PointSet, RayStats};
 use super::mollifier::Constraints;
-use super::rng::Rng;
 use super::sampling::{Domain, Sample};
 use super::{Boundary, BoundaryQueries};
 use crate::error::SkinResult;
 use crate::invalid;
 use crate::progress::{Event, Progress};
+use crate::rng::Rng;
 
 /// Options of the field (defaults: App. A).
 #[derive(Clone, Debug)]

@@ -15,10 +15,10 @@
 use ndarray::{Array2, ArrayView2};
 use rayon::prelude::*;
 
-use super::rng::Rng;
 use super::{norm2, scale, sub, Boundary, BoundaryQueries, FastWinding};
 use crate::error::SkinResult;
 use crate::invalid;
+use crate::rng::Rng;
 
 /// One interior sample: position and energy weight (eq. 11).
 #[derive(Clone, Copy, Debug)]

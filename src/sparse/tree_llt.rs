@@ -6,13 +6,12 @@
 //!
 //! Why not faer's solve: its right-hand sides are column-major, so below every supernode the
 //! rows are gathered and scattered one column at a time; here the block is row-major (a row's
-//! `k` entries share a cache line). And splitting the right-hand sides over the threads (as
-//! before) makes every thread stream the whole factor, while splitting the *tree* makes each
+//! `k` entries share a cache line). And splitting the right-hand sides over the threads
+//! makes every thread stream the whole factor, while splitting the *tree* makes each
 //! stream only its part, for all columns at once. Supernodes in disjoint subtrees never update
 //! each other, only their common ancestors, which are solved afterwards on one thread. Each
-//! part works on its own copy of the block (`n k` doubles per thread of extra memory). On a
-//! 40k-row biharmonic grid (4.1M factor nonzeros, 8 columns) a solve on two threads took
-//! 33-36 ms with faer's (columns split 4 + 4) and takes 24-25 ms.
+//! part works on its own copy of the block (`n k` doubles per thread of extra memory).
+//! `docs/solver.md` has the measurement.
 
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::matmul::matmul;

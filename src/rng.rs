@@ -1,8 +1,10 @@
-//! Small deterministic random streams (SplitMix64, Steele et al. 2014).
+//! The crate's one random number generator: SplitMix64 (Steele et al. 2014), small and
+//! deterministic.
 //!
-//! Every random draw of the field optimisation comes from a stream keyed by
-//! `(seed, purpose, index)`, e.g. `(seed, step, sample)`: each Monte-Carlo sample owns its
-//! stream, so results do not depend on how rayon schedules the work or on the thread count.
+//! The geometric field draws from streams keyed by `(seed, purpose, index)`, e.g.
+//! `(seed, step, sample)`: each Monte-Carlo sample owns its stream, so results do not depend on
+//! how rayon schedules the work or on the thread count. The BBW solvers draw their random start
+//! from one generator ([`Rng::unmixed`]).
 
 /// A SplitMix64 generator.
 #[derive(Clone, Debug)]
@@ -22,6 +24,12 @@ impl Rng {
     /// Generator seeded with `seed`.
     pub fn new(seed: u64) -> Self {
         Rng(mix(seed ^ GOLDEN))
+    }
+
+    /// Generator whose first state is `seed ^ GOLDEN`, without the mixing of [`Rng::new`]: the
+    /// seeding of the BBW random start, kept so that a seed gives the same start as before.
+    pub fn unmixed(seed: u64) -> Self {
+        Rng(seed ^ GOLDEN)
     }
 
     /// Independent stream number `(a, b)` of `seed`.
@@ -73,7 +81,7 @@ impl Rng {
     pub fn in_ball<const D: usize>(&mut self) -> [f64; D] {
         loop {
             let p: [f64; D] = std::array::from_fn(|_| 2.0 * self.uniform() - 1.0);
-            if super::norm2(&p) <= 1.0 {
+            if p.iter().map(|x| x * x).sum::<f64>() <= 1.0 {
                 return p;
             }
         }
@@ -104,6 +112,6 @@ mod tests {
     }
 
     fn norm(d: &[f64; 3]) -> f64 {
-        super::super::norm2(d).sqrt()
+        d.iter().map(|x| x * x).sum::<f64>().sqrt()
     }
 }

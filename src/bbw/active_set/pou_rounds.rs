@@ -1,0 +1,235 @@
+//! Rounds of the partition-of-unity active-set method (see the parent module's docs).
+//!
+//! The CG tolerances below are partition-of-unity residuals (an absolute weight error)
+//! accepted from [`pcg`]; only the support decisions depend on them, since the certificate is
+//! computed on renormalised weights either way.
+
+use std::time::Instant;
+
+use rayon::prelude::*;
+
+use super::next_support::{next_support, SignThresholds};
+use super::pcg::{pcg, row_sums_minus_one};
+use super::spread::spread_negative;
+use super::stall::{Outcome, OwnBounds, StallWatch, Watch, MAX_ROUNDS};
+use super::support_factor::{factor_supports, longest_first};
+use crate::bbw::bounds::CertifiedBounds;
+use crate::bbw::dual::{pou_eval, project_pou};
+use crate::bbw::options::{BbwInfo, BbwOptions};
+use crate::bbw::problem::EliminatedProblem;
+use crate::error::SkinResult;
+use crate::progress::{Event, Progress};
+
+/// CG tolerance of the first round, while the support is still far from right.
+const CG_TOL_FIRST: f64 = 1e-4;
+/// While KKT signs still flip, the CG tolerance is this fraction of the last round's relative
+/// gap (and never rises): a decision that CG noise of a tenth of the gap could flip does not
+/// move the bounds.
+const CG_TOL_PER_GAP: f64 = 0.1;
+/// Lower limit of that tolerance while signs flip, relative to `tol`.
+const CG_TOL_SIGNS: f64 = 1.0;
+/// CG tolerance relative to `tol` once every sign holds: rows are renormalised afterwards, so a
+/// tighter residual changes nothing.
+const CG_TOL_FINAL: f64 = 1e-2;
+/// A round whose gap fell by less than this factor crawls, and the next one dilates its joins
+/// ([`next_support`]).
+const CRAWL: f64 = 4.0;
+
+/// The rounds' state, kept across an L-BFGS intermission: the support guess
+/// (`support[j * nf + i]`), the partition-of-unity multiplier, the CG tolerance and what
+/// decides the dilation of joins ([`next_support`]).
+pub(super) struct RoundsState {
+    support: Vec<bool>,
+    mu: Vec<f64>,
+    cg_tol: f64,
+    dilation: Dilation,
+}
+
+/// The last round's own bounds, whether its joins were dilated, and whether dilation is still
+/// allowed.
+#[derive(Clone, Copy)]
+struct Dilation {
+    allowed: bool,
+    last_dilated: bool,
+    last_gap: f64,
+    last_upper: f64,
+}
+
+impl RoundsState {
+    /// The first support from the warm start's projected weights `w`: the entries above
+    /// `first_above` and each row's largest.
+    pub fn from_warm_start(w: &[f64], first_above: f64, nf: usize, m: usize) -> Self {
+        // The warm start is only accurate to its gap: weights below it are mostly the smooth
+        // tails of W(Y) (eq. 15) over regions that are zero at the optimum, and leaving them
+        // out of the first support saves rounds.
+        let mut support: Vec<bool> = w.iter().map(|&x| x > first_above).collect();
+        for i in 0..nf {
+            // Every row needs a support entry; its largest weight is the safest.
+            let jmax = (0..m)
+                .max_by(|&a, &b| w[a * nf + i].total_cmp(&w[b * nf + i]))
+                .unwrap_or(0);
+            support[jmax * nf + i] = true;
+        }
+        RoundsState {
+            support,
+            mu: vec![0.0; nf],
+            cg_tol: CG_TOL_FIRST,
+            dilation: Dilation {
+                allowed: true,
+                last_dilated: false,
+                last_gap: f64::INFINITY,
+                last_upper: f64::INFINITY,
+            },
+        }
+    }
+}
+
+/// Rounds of the partition-of-unity active-set method from `state`, until the gap is below
+/// `tol`, the KKT signs hold, or `watch` says the rounds have stopped paying.
+pub(super) fn pou_rounds(
+    prob: &EliminatedProblem,
+    opts: &BbwOptions,
+    state: &mut RoundsState,
+    watch: Watch,
+    best: &mut CertifiedBounds,
+    info: &mut BbwInfo,
+    progress: &mut dyn Progress,
+) -> SkinResult<Outcome> {
+    let (nf, m) = (prob.nf(), prob.m);
+    let mut gap_watch = StallWatch::new(best.relative_gap());
+    let mut own_bounds = OwnBounds::new();
+    let budget = opts.max_iter.min(MAX_ROUNDS).saturating_sub(info.rounds);
+    for _ in 0..budget {
+        let round = info.rounds;
+        info.rounds += 1;
+        let RoundsState {
+            support,
+            mu,
+            cg_tol,
+            dilation,
+        } = &mut *state;
+        let t = Instant::now();
+        let factors = factor_supports(&prob.a, support, nf)?;
+        info.time_support_factor += t.elapsed().as_secs_f64();
+        let sizes: Vec<usize> = factors.iter().map(|f| f.idx.len()).collect();
+        let weights = |mu: &[f64]| -> Vec<f64> {
+            let cols = longest_first(&sizes, |j| {
+                let gj = &prob.g[j * nf..(j + 1) * nf];
+                let rhs: Vec<f64> = gj.iter().zip(mu).map(|(g, u)| g + u).collect();
+                factors[j].solve_gathered(&rhs)
+            });
+            let mut w = vec![0.0; nf * m];
+            for (j, (f, col)) in factors.iter().zip(&cols).enumerate() {
+                for (&i, &v) in f.idx.iter().zip(col) {
+                    w[j * nf + i] = -v;
+                }
+            }
+            w
+        };
+        // `S x` and, per column, `A_FF^{-1} x[F]`.
+        let apply_s = |x: &[f64]| -> (Vec<f64>, Vec<Vec<f64>>) {
+            let cols = longest_first(&sizes, |j| factors[j].solve_gathered(x));
+            let mut out = vec![0.0; nf];
+            for (f, col) in factors.iter().zip(&cols) {
+                for (&i, &v) in f.idx.iter().zip(col) {
+                    out[i] += v;
+                }
+            }
+            (out, cols)
+        };
+        // S delta = rowsum(W(mu)) - 1, warm-started at the previous round's mu. W is linear in
+        // mu, so W(mu + delta) = W(mu) - sum_k alpha_k A_FF^{-1} p_k is accumulated from the
+        // solves CG makes anyway (recomputing it would cost one more solve per column).
+        let mut w = weights(mu);
+        let residual = row_sums_minus_one(&w, nf, m);
+        let t = Instant::now();
+        let step = |alpha: f64, cols: &Vec<Vec<f64>>| {
+            w.par_chunks_mut(nf)
+                .zip(factors.par_iter().zip(cols))
+                .for_each(|(wc, (f, col))| {
+                    for (&i, &v) in f.idx.iter().zip(col) {
+                        wc[i] -= alpha * v;
+                    }
+                });
+        };
+        let (delta, iters) = pcg(prob, apply_s, step, &residual, *cg_tol, progress)?;
+        info.time_cg += t.elapsed().as_secs_f64();
+        info.cg_iterations += iters;
+        mu.iter_mut().zip(&delta).for_each(|(u, d)| *u += d);
+
+        // Multipliers y = A w + g + mu on the zero set (eq. 15 read backwards).
+        let aw = prob.apply_a(&w);
+        let mut y = vec![0.0; nf * m];
+        let mut scale: f64 = 1.0;
+        for k in 0..nf * m {
+            let grad = aw[k] + prob.g[k];
+            scale = scale.max(grad.abs());
+            if !support[k] {
+                y[k] = grad + mu[k % nf];
+            }
+        }
+        // Certificate: projected w (upper bound), dual at y spread to >= 0 (lower bound).
+        let feasible = project_pou(&w, nf, m);
+        let upper = prob.energy(&feasible);
+        best.offer(&w, feasible, upper);
+        // The dual's own recovered W(Y) is not offered as a primal candidate: it is smooth but
+        // nowhere exactly zero, and once projected can win on energy by a hair while sitting
+        // far off the optimum in flat directions.
+        let mut y_plus = y.clone();
+        spread_negative(&mut y_plus, &prob.a, nf);
+        let own = pou_eval(prob, &y_plus);
+        let own_lower = own.lower_bound;
+        let own_gap = (upper - own_lower) / upper.abs().max(1e-300);
+        best.bound(&own);
+        progress.report(Event {
+            stage: "active-set",
+            iteration: round,
+            value: best.relative_gap(),
+        })?;
+        // Certified: the next support (two graph searches per column) is not needed.
+        if best.relative_gap() <= opts.tol {
+            return Ok(Outcome::Done);
+        }
+        // A gap that fell by less than a factor CRAWL in a round means the supports' edges
+        // crawl: the joins then bring their neighbourhoods along. If a dilated round raised
+        // the upper bound, dilation overshoots on this problem (it can make the supports
+        // cycle): never again.
+        if dilation.last_dilated && upper > dilation.last_upper {
+            dilation.allowed = false;
+        }
+        let dilate = dilation.allowed && own_gap > dilation.last_gap / CRAWL;
+        dilation.last_dilated = dilate;
+        dilation.last_gap = own_gap;
+        dilation.last_upper = upper;
+        let thresholds = SignThresholds::new(opts.tol, scale);
+        let (next, n_w, n_y) = next_support(&prob.a, support, &w, &y, thresholds, dilate, nf);
+        let exact = n_w == 0 && n_y == 0;
+        if exact && *cg_tol <= CG_TOL_FINAL * opts.tol {
+            // Every KKT sign holds and PoU to round-off: this is the optimum; the gap is as
+            // small as floating point allows.
+            return Ok(Outcome::Done);
+        }
+        // The rounds' own bounds (best may hold an L-BFGS point from the intermission).
+        let quiet = own_bounds.quiet_rounds(upper, own_lower, 0.5 * opts.tol);
+        let stalled = match watch {
+            Watch::Gap(window) => gap_watch.stalled(best.relative_gap(), window),
+            Watch::Bounds => quiet >= 2,
+        };
+        if stalled {
+            return Ok(Outcome::Stalled(y_plus));
+        }
+        // Rows are renormalised at the end, so a PoU residual far below tol changes nothing;
+        // while signs still flip, one of a tenth of the gap, down to CG_TOL_SIGNS * tol,
+        // decides them as well.
+        *cg_tol = if exact {
+            CG_TOL_FINAL * opts.tol
+        } else {
+            (CG_TOL_PER_GAP * own_gap)
+                .max(CG_TOL_SIGNS * opts.tol)
+                .min(*cg_tol)
+        }
+        .max(1e-13);
+        *support = next;
+    }
+    Ok(Outcome::Done)
+}

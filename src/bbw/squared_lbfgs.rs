@@ -1,0 +1,115 @@
+//! The paper's solver (Sec. 6, 8): L-BFGS on the dual in `U` with `Y = U o U`, from a random
+//! start, stopped on the certified duality gap. The active-set solver uses it for its warm start
+//! and its fallbacks.
+
+use std::cell::RefCell;
+
+use rayon::prelude::*;
+
+use super::bounds::CertifiedBounds;
+use super::dual::{box_eval, pou_eval, project_box, project_pou, DualPoint};
+use super::lbfgs::{minimize, LbfgsOptions, Step};
+use super::options::{BbwInfo, BbwOptions};
+use super::problem::EliminatedProblem;
+use crate::error::SkinResult;
+use crate::progress::{Event, Progress};
+use crate::rng::Rng;
+
+/// Iterations between two evaluations of the duality gap.
+const GAP_EVERY: usize = 5;
+
+/// Projects recovered weights onto the primal feasible set of the variant being solved.
+fn project(opts: &BbwOptions, w: &[f64], nf: usize, m: usize) -> Vec<f64> {
+    if opts.partition_of_unity {
+        project_pou(w, nf, m)
+    } else {
+        project_box(w)
+    }
+}
+
+/// The paper's solver: L-BFGS on the dual in `U` with `Y = U o U`, from `start`, until the
+/// duality gap of the best projected iterate is at most `tol` (relative) or `opts.max_iter`.
+/// Adds its iterations and evaluations to `info`.
+pub(crate) fn run_lbfgs(
+    prob: &EliminatedProblem,
+    opts: &BbwOptions,
+    tol: f64,
+    mut u: Vec<f64>,
+    best: &mut CertifiedBounds,
+    info: &mut BbwInfo,
+    progress: &mut dyn Progress,
+) -> SkinResult<()> {
+    let (nf, m) = (prob.nf(), prob.m);
+    let eval = |y: &[f64]| -> DualPoint {
+        if opts.partition_of_unity {
+            pou_eval(prob, y)
+        } else {
+            box_eval(prob, &y[..nf * m], &y[nf * m..])
+        }
+    };
+    let last: RefCell<Option<DualPoint>> = RefCell::new(None);
+    let mut evaluations = 0;
+    let fg = |u: &[f64], grad: &mut [f64]| -> f64 {
+        evaluations += 1;
+        let y: Vec<f64> = u.par_iter().map(|v| v * v).collect();
+        let dp = eval(&y);
+        // d f(U o U) / dU = 2 U o grad_Y f, with grad_Y f = W (eq. 16) or (W, 1 - W).
+        let (gy, gu) = grad.split_at_mut(nf * m);
+        let (uy, uu) = u.split_at(nf * m);
+        gy.par_iter_mut()
+            .zip(uy.par_iter().zip(dp.w.par_iter()))
+            .for_each(|(g, (u, w))| *g = 2.0 * u * w);
+        gu.par_iter_mut()
+            .zip(uu.par_iter().zip(dp.w.par_iter()))
+            .for_each(|(g, (u, w))| *g = 2.0 * u * (1.0 - w));
+        let f = dp.objective;
+        *last.borrow_mut() = Some(dp);
+        f
+    };
+    let lopts = LbfgsOptions {
+        memory: opts.memory,
+        max_iter: opts.max_iter,
+    };
+    let iterations = minimize(&mut u, &lopts, fg, |it, _x, _f, _g| {
+        // The certificate costs a sparse product; checking it every few iterations keeps the
+        // stop at most GAP_EVERY - 1 iterations late.
+        if it % GAP_EVERY == 0 {
+            let dp = last.borrow();
+            let dp = dp.as_ref().expect("objective evaluated before monitor");
+            let feasible = project(opts, &dp.w, nf, m);
+            let upper = prob.energy(&feasible);
+            best.update(dp, feasible, upper);
+        }
+        progress.report(Event {
+            stage: "dual",
+            iteration: it,
+            value: best.relative_gap(),
+        })?;
+        Ok(if it % GAP_EVERY == 0 && best.relative_gap() <= tol {
+            Step::Stop
+        } else {
+            Step::Continue
+        })
+    })?;
+    // Certify the final iterate too (the loop may end between two gap checks).
+    if let Some(dp) = last.borrow_mut().take() {
+        let feasible = project(opts, &dp.w, nf, m);
+        let upper = prob.energy(&feasible);
+        best.update(&dp, feasible, upper);
+    }
+    info.iterations += iterations;
+    info.evaluations += evaluations;
+    Ok(())
+}
+
+/// The paper's start (Sec. 8): uniform random `U`, scaled so each column of `U o U` sums to 1.
+pub(crate) fn random_start(nf: usize, m: usize, blocks: usize, seed: u64) -> Vec<f64> {
+    let mut rng = Rng::unmixed(seed);
+    let mut u: Vec<f64> = (0..nf * m * blocks).map(|_| rng.uniform()).collect();
+    for col in u.chunks_mut(nf) {
+        let s: f64 = col.iter().map(|v| v * v).sum();
+        let scale = 1.0 / s.sqrt().max(1e-300);
+        col.iter_mut().for_each(|v| *v *= scale);
+    }
+    u
+}
