@@ -15,7 +15,7 @@ $(VENV)/.deps: pyproject.toml Makefile
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q "maturin>=1.5,<2" numpy scipy matplotlib tqdm pytest libigl gpytoolbox \
 	    clarabel osqp triangle tetgen pytetwild pyvista nbmake ipykernel ruff meshio trimesh \
-	    pygltflib
+	    pygltflib panda3d panda3d-gltf
 	touch $@
 
 # Blender as a Python module (skinrs[blender]; a 375 MB wheel, 1 GB installed) for the test that

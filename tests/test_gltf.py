@@ -106,6 +106,43 @@ def run_blender(tmp_path, glb, pose=None):
     return np.load(out), export
 
 
+# Runs in a subprocess: loads a .glb with panda3d-gltf (a game-engine loader: skinning matrix =
+# joint world matrix x inverse bind matrix), sets every joint's parent-relative matrix, and saves
+# the rest and CPU-skinned vertices in glTF's Y-up coordinates.
+PANDA3D_SCRIPT = r"""
+import sys
+import numpy as np
+from panda3d.core import LMatrix4f, Thread, GeomVertexReader, NodePath, loadPrcFileData
+loadPrcFileData("", "window-type none\naudio-library-name null\nnotify-level error")
+import gltf
+from direct.actor.Actor import Actor
+
+glb, pose, out = sys.argv[1:4]
+p = np.load(pose)
+S = np.eye(4)
+S[:3, :3] = [[1.0, 0, 0], [0, 0, -1], [0, 1, 0]]  # glTF Y-up -> Panda3D Z-up
+actor = Actor(NodePath(gltf.load_model(glb)))
+for name, L in zip(p["names"], p["local"]):
+    joint = actor.controlJoint(None, "modelRoot", str(name))
+    joint.setMat(LMatrix4f(*(S @ L @ S.T).T.reshape(-1).tolist()))  # row-vector convention
+actor.update(force=True)
+
+
+def vertices(animated):
+    xyz = []
+    for path in actor.findAllMatches("**/+GeomNode"):
+        for geom in path.node().getGeoms():
+            data = geom.getAnimatedVertexData(True, Thread.getCurrentThread()) if animated else geom.getVertexData()
+            reader = GeomVertexReader(data, "vertex")
+            while not reader.isAtEnd():
+                xyz.append(tuple(reader.getData3()))
+    return np.array(xyz) @ S[:3, :3]
+
+
+np.savez(out, rest=vertices(False), posed=vertices(True))
+"""
+
+
 def blender_python():
     """A Python that can import bpy, or None."""
     for exe in (os.environ.get("SKINRS_BLENDER_PYTHON"), ROOT / ".venv-blender" / "bin" / "python"):
@@ -196,6 +233,41 @@ def test_blender_poses_the_command_lines_arm_like_lbs(data_dir, tmp_path):
     assert np.linalg.norm(U - a["V"], axis=1).max() > 0.2 * diag  # a real pose
     deviation = np.linalg.norm(b["frames"][0][rows] - U, axis=1).max() / diag
     assert deviation <= 1e-4  # measured: 1.6e-7
+
+
+def test_panda3d_poses_the_glb_like_lbs(arm, tmp_path):
+    if importlib.util.find_spec("gltf") is None:
+        pytest.skip("Panda3D check skipped: `make venv` installs panda3d and panda3d-gltf")
+    V, F, C, BE, W = arm
+    packed = skinrs.reduce_weights(W, 4, "k-largest")
+    write_gltf(tmp_path / "arm.glb", V, F, packed, C, BE)
+    j = read_gltf(tmp_path / "arm.glb")["joints"]
+    T = _pose(C, BE, 6)
+    world = (
+        gltf_rig.homogeneous(gltf_rig.joint_poses(T[None], j["column"], j["parents"], j["bind"])[0])
+        @ j["bind"]
+    )
+    local = gltf_rig.local_matrices(j["parents"], world)  # each joint relative to its parent
+    np.savez(tmp_path / "pose.npz", names=np.array(j["names"]), local=local)
+    (tmp_path / "panda.py").write_text(PANDA3D_SCRIPT)
+    args = [
+        sys.executable,
+        tmp_path / "panda.py",
+        tmp_path / "arm.glb",
+        tmp_path / "pose.npz",
+        tmp_path / "out.npz",
+    ]
+    run = subprocess.run(
+        list(map(str, args)), check=False, capture_output=True, text=True, timeout=300
+    )
+    assert run.returncode == 0, run.stderr[-2000:]
+    out = np.load(tmp_path / "out.npz")
+    dist, rows = cKDTree(out["rest"]).query(V)  # (Panda3D does not share vertices)
+    diag = np.linalg.norm(np.ptp(V, axis=0))
+    assert dist.max() <= 1e-6 * diag
+    U = skinrs.lbs(V, packed, T)
+    assert np.linalg.norm(U - V, axis=1).max() > 0.1 * diag  # a real pose
+    assert np.linalg.norm(out["posed"][rows] - U, axis=1).max() <= 1e-4 * diag  # measured 1.7e-6
 
 
 def test_round_trip_keeps_mesh_skeleton_weights_and_animation(arm, tmp_path):
