@@ -8,6 +8,7 @@ pub mod bbw;
 pub mod constraints;
 pub mod error;
 pub mod field;
+mod geometry;
 pub mod limits;
 pub mod operators;
 pub mod progress;

@@ -91,6 +91,7 @@ impl Rng {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geometry::norm;
 
     #[test]
     fn streams_are_reproducible_and_distinct() {
@@ -109,9 +110,5 @@ mod tests {
         assert!((m - 0.5).abs() < 0.01);
         let d: [f64; 3] = r.direction();
         assert!((norm(&d) - 1.0).abs() < 1e-12);
-    }
-
-    fn norm(d: &[f64; 3]) -> f64 {
-        d.iter().map(|x| x * x).sum::<f64>().sqrt()
     }
 }

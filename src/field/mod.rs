@@ -33,51 +33,7 @@ pub use grid::{knn_distance, HashGrid};
 pub use optimize::{FieldOptions, GeometricField};
 pub use winding::{winding_number_2d, FastWinding};
 
-pub(crate) type P3 = [f64; 3];
-pub(crate) type P2 = [f64; 2];
-
-#[inline]
-pub(crate) fn sub<const D: usize>(a: &[f64; D], b: &[f64; D]) -> [f64; D] {
-    std::array::from_fn(|i| a[i] - b[i])
-}
-
-#[inline]
-pub(crate) fn add<const D: usize>(a: &[f64; D], b: &[f64; D]) -> [f64; D] {
-    std::array::from_fn(|i| a[i] + b[i])
-}
-
-#[inline]
-pub(crate) fn scale<const D: usize>(a: &[f64; D], s: f64) -> [f64; D] {
-    std::array::from_fn(|i| a[i] * s)
-}
-
-#[inline]
-pub(crate) fn dot<const D: usize>(a: &[f64; D], b: &[f64; D]) -> f64 {
-    let mut s = 0.0;
-    for i in 0..D {
-        s += a[i] * b[i];
-    }
-    s
-}
-
-#[inline]
-pub(crate) fn norm2<const D: usize>(a: &[f64; D]) -> f64 {
-    dot(a, a)
-}
-
-#[inline]
-pub(crate) fn cross(a: &P3, b: &P3) -> P3 {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-
-#[inline]
-pub(crate) fn cross2(a: &P2, b: &P2) -> f64 {
-    a[0] * b[1] - a[1] * b[0]
-}
+pub(crate) use crate::geometry::{add, cross, cross2, dot, norm2, scale, sub, P2, P3};
 
 /// Copies row `i` of an `(n, D)` view into a fixed-size array.
 #[inline]

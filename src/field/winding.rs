@@ -546,7 +546,7 @@ mod tests {
     #[test]
     fn fast_2d_matches_exact_sum() {
         // In 2D the kernel decays like 1/d only, so at equal beta the far field is less accurate
-        // than in 3D (measured here: 8.6e-3, 2.0e-3, 6.1e-4 for beta = 2, 3, 4).
+        // than in 3D (see docs/field.md for the errors at beta = 2, 3, 4).
         // A wiggly star polygon (counter-clockwise), 600 segments.
         let n = 600;
         let v = ndarray::Array2::from_shape_fn((n, 2), |(i, k)| {

@@ -5,8 +5,9 @@ use faer::sparse::SymbolicSparseColMat;
 use ndarray::ArrayView2;
 use rayon::prelude::*;
 
-use super::elements::{check_elements, corners, cross, dot, point, sub, triple, Simplex, P3};
+use super::elements::{check_elements, corners, point, Simplex, P3};
 use crate::error::SkinResult;
+use crate::geometry::{cross, dot, sub, triple};
 use crate::sparse::Csc;
 
 /// Local vertex pairs of a triangle; pair `k` is the edge opposite corner `k`.
@@ -54,14 +55,14 @@ fn triangle_weights(v: &ArrayView2<f64>, e: &[usize; 4], out: &mut [f64]) {
     let p: [P3; 3] = [point(v, e[0]), point(v, e[1]), point(v, e[2])];
     // |u x w| is twice the area for every corner; compute it once.
     let dbl_area = {
-        let c = cross(sub(p[1], p[0]), sub(p[2], p[0]));
-        dot(c, c).sqrt()
+        let c = cross(&sub(&p[1], &p[0]), &sub(&p[2], &p[0]));
+        dot(&c, &c).sqrt()
     };
     for (corner, o) in out.iter_mut().enumerate() {
         let a = p[corner];
-        let u = sub(p[(corner + 1) % 3], a);
-        let w = sub(p[(corner + 2) % 3], a);
-        *o = 0.5 * dot(u, w) / dbl_area;
+        let u = sub(&p[(corner + 1) % 3], &a);
+        let w = sub(&p[(corner + 2) % 3], &a);
+        *o = 0.5 * dot(&u, &w) / dbl_area;
     }
 }
 
@@ -71,13 +72,13 @@ fn triangle_weights(v: &ArrayView2<f64>, e: &[usize; 4], out: &mut [f64]) {
 /// g_3 = e1 x e2 and g_0 = -(g_1 + g_2 + g_3), so L_ab = -(g_a . g_b) / (6 |det J|).
 fn tet_weights(v: &ArrayView2<f64>, e: &[usize; 4], out: &mut [f64]) {
     let p0 = point(v, e[0]);
-    let e1 = sub(point(v, e[1]), p0);
-    let e2 = sub(point(v, e[2]), p0);
-    let e3 = sub(point(v, e[3]), p0);
-    let det = triple(e1, e2, e3).abs();
-    let g1 = cross(e2, e3);
-    let g2 = cross(e3, e1);
-    let g3 = cross(e1, e2);
+    let e1 = sub(&point(v, e[1]), &p0);
+    let e2 = sub(&point(v, e[2]), &p0);
+    let e3 = sub(&point(v, e[3]), &p0);
+    let det = triple(&e1, &e2, &e3).abs();
+    let g1 = cross(&e2, &e3);
+    let g2 = cross(&e3, &e1);
+    let g3 = cross(&e1, &e2);
     let g0 = [
         -(g1[0] + g2[0] + g3[0]),
         -(g1[1] + g2[1] + g3[1]),
@@ -85,7 +86,7 @@ fn tet_weights(v: &ArrayView2<f64>, e: &[usize; 4], out: &mut [f64]) {
     ];
     let g = [g0, g1, g2, g3];
     for (o, &(a, b)) in out.iter_mut().zip(TET_EDGES.iter()) {
-        *o = -dot(g[a], g[b]) / (6.0 * det);
+        *o = -dot(&g[a], &g[b]) / (6.0 * det);
     }
 }
 

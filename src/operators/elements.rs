@@ -1,4 +1,4 @@
-//! Element geometry shared by the operators: small 3-vector helpers, element measures and the
+//! Element geometry shared by the operators: corner points, element measures and the
 //! validation every operator runs before touching the mesh.
 
 use ndarray::ArrayView2;
@@ -7,9 +7,10 @@ use rayon::prelude::*;
 use crate::error::SkinResult;
 use crate::invalid;
 
-/// A point or vector; 2D points are embedded with z = 0.
-pub(crate) type P3 = [f64; 3];
+pub(crate) use crate::geometry::P3;
+use crate::geometry::{cross, norm, sub, triple};
 
+/// Corner `i` of `v` as a 3D point (2D points get z = 0).
 #[inline]
 pub(crate) fn point(v: &ArrayView2<f64>, i: usize) -> P3 {
     let mut p = [0.0; 3];
@@ -17,46 +18,6 @@ pub(crate) fn point(v: &ArrayView2<f64>, i: usize) -> P3 {
         *x = v[[i, d]];
     }
     p
-}
-
-#[inline]
-pub(crate) fn sub(a: P3, b: P3) -> P3 {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-#[inline]
-pub(crate) fn add(a: P3, b: P3) -> P3 {
-    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
-}
-
-#[inline]
-pub(crate) fn scale(a: P3, s: f64) -> P3 {
-    [a[0] * s, a[1] * s, a[2] * s]
-}
-
-#[inline]
-pub(crate) fn dot(a: P3, b: P3) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-#[inline]
-pub(crate) fn cross(a: P3, b: P3) -> P3 {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-
-#[inline]
-pub(crate) fn norm(a: P3) -> f64 {
-    dot(a, a).sqrt()
-}
-
-/// Triple product `a . (b x c)` = det[a, b, c].
-#[inline]
-pub(crate) fn triple(a: P3, b: P3, c: P3) -> f64 {
-    dot(a, cross(b, c))
 }
 
 /// What kind of simplices `(v, f)` describes.
@@ -121,12 +82,12 @@ pub(crate) fn corners(f: &ArrayView2<usize>, t: usize) -> [usize; 4] {
 /// Measure of element `e` (indices must be valid).
 fn measure(kind: Simplex, v: &ArrayView2<f64>, e: &[usize]) -> f64 {
     let p0 = point(v, e[0]);
-    let a = sub(point(v, e[1]), p0);
-    let b = sub(point(v, e[2]), p0);
+    let a = sub(&point(v, e[1]), &p0);
+    let b = sub(&point(v, e[2]), &p0);
     match kind {
-        Simplex::Triangle2 => 0.5 * cross(a, b)[2],
-        Simplex::Triangle3 => 0.5 * norm(cross(a, b)),
-        Simplex::Tet => triple(a, b, sub(point(v, e[3]), p0)) / 6.0,
+        Simplex::Triangle2 => 0.5 * cross(&a, &b)[2],
+        Simplex::Triangle3 => 0.5 * norm(&cross(&a, &b)),
+        Simplex::Tet => triple(&a, &b, &sub(&point(v, e[3]), &p0)) / 6.0,
     }
 }
 

@@ -4,10 +4,9 @@
 use ndarray::ArrayView2;
 use rayon::prelude::*;
 
-use super::elements::{
-    add, check_elements, corners, cross, dot, norm, point, scale, sub, triple, Simplex, P3,
-};
+use super::elements::{check_elements, corners, point, Simplex, P3};
 use crate::error::SkinResult;
+use crate::geometry::{add, cross, dot, norm, scale, sub, triple};
 
 /// How an element's measure is shared among its corners.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -66,7 +65,7 @@ fn triangle_points(v: &ArrayView2<f64>, e: &[usize; 4]) -> [P3; 3] {
 }
 
 fn triangle_area(p: &[P3; 3]) -> f64 {
-    0.5 * norm(cross(sub(p[1], p[0]), sub(p[2], p[0])))
+    0.5 * norm(&cross(&sub(&p[1], &p[0]), &sub(&p[2], &p[0])))
 }
 
 fn triangle_barycentric(v: &ArrayView2<f64>, e: &[usize; 4]) -> [f64; 4] {
@@ -81,9 +80,9 @@ fn circumcentre_weights(p: &[P3; 3]) -> ([f64; 3], [f64; 3]) {
     let mut w = [0.0; 3];
     for i in 0..3 {
         let (a, b, c) = (p[i], p[(i + 1) % 3], p[(i + 2) % 3]);
-        d[i] = dot(sub(b, a), sub(c, a));
-        let opp = sub(c, b);
-        w[i] = d[i] * dot(opp, opp);
+        d[i] = dot(&sub(&b, &a), &sub(&c, &a));
+        let opp = sub(&c, &b);
+        w[i] = d[i] * dot(&opp, &opp);
     }
     (d, w)
 }
@@ -120,9 +119,9 @@ fn triangle_voronoi(v: &ArrayView2<f64>, e: &[usize; 4]) -> [f64; 4] {
 fn tet_barycentric(v: &ArrayView2<f64>, e: &[usize; 4]) -> [f64; 4] {
     let p0 = point(v, e[0]);
     let vol = triple(
-        sub(point(v, e[1]), p0),
-        sub(point(v, e[2]), p0),
-        sub(point(v, e[3]), p0),
+        &sub(&point(v, e[1]), &p0),
+        &sub(&point(v, e[2]), &p0),
+        &sub(&point(v, e[3]), &p0),
     )
     .abs()
         / 6.0;
@@ -135,14 +134,14 @@ fn snapped_face_centre(p: &[P3; 3]) -> P3 {
     let (_, w) = circumcentre_weights(p);
     let j = argmin(&w);
     if w[j] < 0.0 {
-        return scale(add(p[(j + 1) % 3], p[(j + 2) % 3]), 0.5);
+        return scale(&add(&p[(j + 1) % 3], &p[(j + 2) % 3]), 0.5);
     }
     let sum = w[0] + w[1] + w[2];
     let off = add(
-        scale(sub(p[1], p[0]), w[1] / sum),
-        scale(sub(p[2], p[0]), w[2] / sum),
+        &scale(&sub(&p[1], &p[0]), w[1] / sum),
+        &scale(&sub(&p[2], &p[0]), w[2] / sum),
     );
-    add(p[0], off)
+    add(&p[0], &off)
 }
 
 /// libigl `voronoi_mass`: each corner gets the volume of its part of the tet cut by the
@@ -161,40 +160,44 @@ fn tet_voronoi(v: &ArrayView2<f64>, e: &[usize; 4]) -> [f64; 4] {
         snapped_face_centre(&[p[(q + 1) % 4], p[(q + 2) % 4], p[(q + 3) % 4]])
     });
     let centre = {
-        let e1 = sub(p[1], p[0]);
-        let e2 = sub(p[2], p[0]);
-        let e3 = sub(p[3], p[0]);
-        let g = [cross(e2, e3), cross(e3, e1), cross(e1, e2)];
-        let det = dot(e1, g[0]);
+        let e1 = sub(&p[1], &p[0]);
+        let e2 = sub(&p[2], &p[0]);
+        let e3 = sub(&p[3], &p[0]);
+        let g = [cross(&e2, &e3), cross(&e3, &e1), cross(&e1, &e2)];
+        let det = dot(&e1, &g[0]);
         // 2 [e1 e2 e3]^T x = (|e1|^2, |e2|^2, |e3|^2), x = circumcentre - p0.
         let x = scale(
-            add(
-                add(scale(g[0], dot(e1, e1)), scale(g[1], dot(e2, e2))),
-                scale(g[2], dot(e3, e3)),
+            &add(
+                &add(&scale(&g[0], dot(&e1, &e1)), &scale(&g[1], dot(&e2, &e2))),
+                &scale(&g[2], dot(&e3, &e3)),
             ),
             0.5 / det,
         );
-        let l = [dot(x, g[0]) / det, dot(x, g[1]) / det, dot(x, g[2]) / det];
+        let l = [
+            dot(&x, &g[0]) / det,
+            dot(&x, &g[1]) / det,
+            dot(&x, &g[2]) / det,
+        ];
         let bary = [1.0 - l[0] - l[1] - l[2], l[0], l[1], l[2]];
         let j = argmin(&bary);
         if bary[j] < 0.0 {
             face[j]
         } else {
-            add(p[0], x)
+            add(&p[0], &x)
         }
     };
     std::array::from_fn(|j| {
         let o = p[j];
-        let c = sub(centre, o);
+        let c = sub(&centre, &o);
         // m[k], f[k] for k = 1..3: midpoint of edge (j, j+k), centre of face opposite j+k.
-        let m: [P3; 4] = std::array::from_fn(|k| scale(sub(p[(j + k) % 4], o), 0.5));
-        let f: [P3; 4] = std::array::from_fn(|k| sub(face[(j + k) % 4], o));
+        let m: [P3; 4] = std::array::from_fn(|k| scale(&sub(&p[(j + k) % 4], &o), 0.5));
+        let f: [P3; 4] = std::array::from_fn(|k| sub(&face[(j + k) % 4], &o));
         // Boundary triangles not through the corner: (c, m_{k+1}, f_k) and (c, f_k, m_{k+2});
         // those through the corner contribute nothing with the corner as origin.
         let vol: f64 = (1..4)
             .map(|k| {
                 let (k1, k2) = (k % 3 + 1, (k + 1) % 3 + 1);
-                triple(c, m[k1], f[k]) + triple(c, f[k], m[k2])
+                triple(&c, &m[k1], &f[k]) + triple(&c, &f[k], &m[k2])
             })
             .sum();
         // Odd corners see the tet with the opposite orientation.

@@ -179,8 +179,8 @@ impl Progress for PyProgress {
 
 #[pymodule]
 fn _skinrs(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    // Sparse factorisations run single-threaded: on small machines two threads were slower;
-    // rayon parallelism is used for assembly and independent work instead.
+    // Sparse factorisations run single-threaded (faster on small machines, see
+    // docs/benchmarks.md); rayon parallelism is used for assembly and independent work instead.
     faer::set_global_parallelism(faer::Par::Seq);
     m.add("InternalError", m.py().get_type::<InternalError>())?;
     operators::register(m)?;

@@ -1,5 +1,5 @@
 //! Coarse space of the two-level preconditioner of the conjugate-gradient solver
-//! ([`super::solver`]).
+//! ([`super::cg`]).
 //!
 //! The block preconditioner of the local iteration removes the error inside each vertex's `k`
 //! weights but not the smooth (low-frequency) error over the surface, which a Laplacian energy
@@ -29,7 +29,7 @@ use rayon::prelude::*;
 use crate::error::{SkinError, SkinResult};
 use crate::sparse::{cholesky, from_triplets};
 
-use super::solver::Problem;
+use super::problem::Problem;
 
 /// Target number of vertices per aggregate.
 const AGGREGATE: usize = 64;

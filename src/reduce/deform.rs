@@ -6,8 +6,8 @@ use ndarray::{s, Array2, Array3, ArrayView2, ArrayView3, ArrayView4, Axis};
 use rayon::prelude::*;
 
 use crate::error::SkinResult;
+use crate::geometry::cross;
 use crate::invalid;
-use crate::skin::quat::cross;
 use crate::skin::{lbs_into, lbs_with_normals, per_vertex_normals, Weights};
 
 /// Row `i` of `v`, zero-padded to 3D.

@@ -3,15 +3,23 @@
 //!
 //! - [`reduce_weights`]: the k-largest baseline, smooth (Sec. 3.1), geometric (3.2, eq. 3) and
 //!   Poisson (3.3, eq. 5) reductions for cages (control points) and skeletons (Sec. 4), solved by
-//!   the parallel local iteration of Sec. 3.1 ([`solver`]) with exact per-vertex QPs ([`qp`]),
-//!   or without bounds by preconditioned conjugate gradients ([`solver`], [`coarse`]).
+//!   the parallel local iteration of Sec. 3.1 ([`local`]) with exact per-vertex QPs ([`qp`]),
+//!   or without bounds by preconditioned conjugate gradients ([`cg`], [`coarse`]); [`solver`]
+//!   describes the method and chooses the iteration.
 //! - [`deform`] (the shared linear blend skinning over all example poses),
 //!   [`transform_normals`] (Sec. 5) and [`deformation_errors`] (Sec. 6).
 
 #![allow(clippy::needless_range_loop)] // index loops mirror the formulas
 
+mod basis;
+mod blocks;
+mod cg;
 mod coarse;
+mod coupling;
 mod deform;
+mod iteration;
+mod local;
+mod problem;
 pub(crate) mod qp;
 mod solver;
 
@@ -23,9 +31,12 @@ use crate::invalid;
 use crate::operators::{self, MassKind};
 use crate::progress::Progress;
 
+use basis::Basis;
+use coupling::Coupling;
 pub use deform::{deform, deformation_errors, transform_normals, DeformationErrors, Poses};
+use iteration::SolveOptions;
+use problem::{LinearPrecision, Problem};
 pub use solver::Solver;
-use solver::{Basis, Coupling, LinearPrecision, Problem, SolveOptions};
 
 /// Which weights to keep and how to set them.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -87,7 +98,7 @@ pub struct ReduceOptions<'a> {
     /// Upper bound on the sweeps of the local iteration.
     pub max_sweeps: usize,
     /// Stop when the mean decrease of the objective over the last (up to 4) sweeps is at most
-    /// `tol` times its decrease since the start (see `solver::should_stop`).
+    /// `tol` times its decrease since the start (see `iteration::should_stop`).
     pub tol: f64,
     /// Over-relaxation factor of each block step, in (0, 2); 1 is plain block Gauss-Seidel.
     pub relaxation: f64,
@@ -380,7 +391,7 @@ pub fn reduce_weights<'a>(
         && !opts.nonnegative
         && method != Method::Geometric
         && (method != Method::Smooth || k < u8::MAX as usize)
-        && (opts.solver == Solver::Cg || n.saturating_mul(k * k) <= solver::FAST_LIMIT);
+        && (opts.solver == Solver::Cg || n.saturating_mul(k * k) <= blocks::FAST_LIMIT);
     if opts.solver == Solver::Cg && !use_cg {
         return invalid!(
             "solver='cg' needs nonnegative=False and a coupled method (smooth or poisson); \

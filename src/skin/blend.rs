@@ -6,8 +6,8 @@
 //! per row of `[R | t]` (padded with zeros in 2D), for DQS the two quaternions of a dual
 //! quaternion. The blend `sum_j w_j table[j]` is then `G` 4-wide multiply-adds per influence.
 //! On x86_64 with AVX2 + FMA it runs on explicit 256-bit registers with fused multiply-adds
-//! (LLVM's auto-vectoriser shuffled the plain version badly); elsewhere a scalar loop with the same
-//! summation order runs (results then differ from the FMA path only by rounding).
+//! (LLVM's auto-vectoriser shuffles the plain loop between registers); elsewhere a scalar loop
+//! with the same summation order runs (results then differ from the FMA path only by rounding).
 
 use rayon::prelude::*;
 
@@ -130,9 +130,8 @@ impl Influences<'_> {
 }
 
 /// `sum_l w[l] table[index[l]]` (or `sum_j w[j] table[j]` without `index`): two accumulators,
-/// even and odd influences, added at the end (two independent chains of multiply-adds; four
-/// measured slower here). Indices must have been checked by
-/// [`Influences::row`].
+/// even and odd influences, added at the end (two independent chains of multiply-adds; see
+/// `docs/skinning.md`). Indices must have been checked by [`Influences::row`].
 #[inline(always)]
 pub(crate) fn blend<const G: usize, const AVX: bool>(
     w: &[f64],
@@ -279,10 +278,9 @@ pub(crate) mod avx {
     ///
     /// Why `B G <= 9`: AVX2 has 16 `ymm` registers. The accumulators (`B G`), the handle's rows
     /// (`G`) and the broadcast weights (`B`) must all fit, or LLVM spills accumulators to the
-    /// stack and the loop becomes a chain of store-to-load forwards (the 4-vertex version of this
-    /// kernel, 12 + 3 + 4 = 19 registers, did exactly that: one accumulator went through the
-    /// stack every handle and ~20 register moves shuffled the rest; it took 3x the CPU time of
-    /// this one for n = 1M, m = 16). `B = 3, G = 3` uses 9 + 3 + 3 = 15 registers (2D: `B = 4`,
+    /// stack and the loop becomes a chain of store-to-load forwards (a 4-vertex block needs
+    /// 12 + 3 + 4 = 19 registers; see `docs/skinning.md`). `B = 3, G = 3` uses 9 + 3 + 3 = 15
+    /// registers (2D: `B = 4`,
     /// 8 + 2 + 4 = 14), and the 8 or 9 independent accumulator chains cover the FMA latency
     /// (4 cycles x 2 FMA pipes = 8 chains needed).
     #[target_feature(enable = "avx2,fma")]
@@ -321,9 +319,8 @@ pub(crate) mod avx {
     }
 
     /// All rows of a chunk with packed weights (`k` influences per vertex), in one function so
-    /// that nothing in the loop is a call: before, the per-vertex blend (`accumulate`) was not
-    /// inlined, and each vertex paid a call plus a return of its `G` registers through the
-    /// stack. Each handle index is checked once (`table.get`, no separate validation pass);
+    /// that nothing in the loop is a call (a per-vertex call would return its `G` registers
+    /// through the stack). Each handle index is checked once (`table.get`, no separate validation pass);
     /// returns the first `(row, slot)` holding an index outside `0..m`, having written the rows
     /// before it.
     #[target_feature(enable = "avx2,fma")]

@@ -9,11 +9,12 @@ use super::blend::{
     blend, first_nonfinite, has_avx2, par_chunks, to_skin_error, ChunkError, Held, Influences,
     Lanes,
 };
-use super::quat::{cross, from_matrix, Quat};
+use super::quat::{from_matrix, Quat};
 use super::{
     check_normals, explain_nonfinite, outputs, slice_of, standard2, transform_blocks, Weights,
 };
 use crate::error::SkinResult;
+use crate::geometry::cross;
 use crate::invalid;
 
 /// Largest accepted deviation `max |R^T R - I|` of a transform's linear part from a rotation.

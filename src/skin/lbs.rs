@@ -287,9 +287,9 @@ fn cofactor_normal<const D: usize>(a: &Lanes<D>, n: &[f64], out: &mut [f64]) {
         let r = |p: usize| [e(p, 0), e(p, 1), e(p, 2)];
         let (r0, r1, r2) = (r(0), r(1), r(2));
         let rows = [
-            super::quat::cross(&r1, &r2),
-            super::quat::cross(&r2, &r0),
-            super::quat::cross(&r0, &r1),
+            crate::geometry::cross(&r1, &r2),
+            crate::geometry::cross(&r2, &r0),
+            crate::geometry::cross(&r0, &r1),
         ];
         for p in 0..3 {
             c[p] = rows[p][0] * n[0] + rows[p][1] * n[1] + rows[p][2] * n[2];

@@ -3,8 +3,8 @@
 use ndarray::{Array2, ArrayView2};
 use rayon::prelude::*;
 
-use super::quat::cross;
 use crate::error::SkinResult;
+use crate::geometry::cross;
 use crate::invalid;
 
 /// Area-weighted per-vertex normals (libigl `per_vertex_normals` with

@@ -1,5 +1,7 @@
 //! Unit quaternions stored `[w, x, y, z]` (scalar first), as plain arrays.
 
+use crate::geometry::cross;
+
 /// Quaternion `[w, x, y, z]`.
 pub type Quat = [f64; 4];
 
@@ -11,15 +13,6 @@ pub fn mul(a: &Quat, b: &Quat) -> Quat {
         a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2],
         a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1],
         a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0],
-    ]
-}
-
-#[inline(always)]
-pub fn cross(a: &[f64; 3], b: &[f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
     ]
 }
 
