@@ -225,19 +225,14 @@ def reduce_weights(
         i.e. the iteration has stopped making progress relative to what it has achieved.
     relaxation : float in (0, 2)
         Over-relaxation of each per-vertex step of the local iteration (1 = plain block
-        Gauss-Seidel as in the paper; the default 1.9 needs several times fewer sweeps and
-        reaches the same minimum).
+        Gauss-Seidel as in the paper; larger values need fewer sweeps to the same minimum).
     energy : {"gradient", "laplacian"}
         How smooth and Poisson compare functions on the surface. ``"gradient"`` (default):
         ``int |grad(phi - psi)|^2 dA``, the Poisson problem of Sec. 3.3 in its gradient form
         ``min int |grad phi - w|^2``; ``"laplacian"``: ``int (lap(phi - psi))^2 dA``, eqs. (4)-(5)
         as printed. The squared Laplacian barely penalises smooth (low-frequency) errors, so its
-        minimiser drifts away from the example poses and converges slowly. Measured on held-out
-        poses (7 fitting, 8 held-out random poses, seeds 1/2, non-negative weights), RMS normal
-        deviation / position error: hand-403 20 -> 4: gradient 0.0244 rad / 0.085 %, laplacian
-        0.0507 rad / 0.240 % (converged without bounds: 0.0597 / 0.295), k-largest 0.0278 /
-        0.059; arm 4 -> 2: gradient 0.0035 / 0.045, laplacian 0.0045 / 0.052, k-largest
-        0.0045 / 0.052. Hence the default.
+        minimiser drifts away from the example poses and converges slowly; held-out errors of
+        both are compared in ``docs/reduce.md``.
     solver : {"auto", "local", "cg"}
         How coupled problems (smooth, Poisson) are minimised. ``"local"``: the local iteration
         of Sec. 3.1 (per-vertex QPs over graph-colour classes in parallel, over-relaxed);
