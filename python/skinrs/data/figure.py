@@ -34,7 +34,7 @@ FACES = [(0, -1), (0, 1), (1, -1), (1, 1), (2, -1), (2, 1)]
 
 def _face_grid(center, half, axis, sign, n):
     """(n+1)^2 vertices and n^2 outward quads of one box face, the face's own vertices."""
-    u, v = [a for a in range(3) if a != axis]
+    u, v = (axis + 1) % 3, (axis + 2) % 3  # u x v = +axis
     if sign < 0:
         u, v = v, u  # keep the quads outward
     s = np.linspace(-1.0, 1.0, n + 1)
