@@ -8,14 +8,15 @@ PY     := $(VENV)/bin/python
 BLENDER_VENV ?= .venv-blender
 export SKINRS_BLENDER_PYTHON := $(abspath $(BLENDER_VENV))/bin/python
 
-.PHONY: venv build demo test quicktest pytest lint bench clean
+# The dependencies and the `test` extra of pyproject.toml, read from there (one list).
+DEPS = $(shell $(PYTHON) -c "import shlex, tomllib; p = tomllib.load(open('pyproject.toml', 'rb'))['project']; print(' '.join(map(shlex.quote, p['dependencies'] + p['optional-dependencies']['test'])))")
+
+.PHONY: venv build demo test quicktest pytest lint typecheck bench clean
 
 $(VENV)/.deps: pyproject.toml Makefile
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q "maturin>=1.5,<2" numpy scipy matplotlib tqdm pytest libigl gpytoolbox \
-	    clarabel osqp triangle tetgen pytetwild pyvista nbmake ipykernel ruff meshio trimesh \
-	    pygltflib panda3d panda3d-gltf
+	$(PY) -m pip install -q "maturin>=1.5,<2" $(DEPS)
 	touch $@
 
 # Blender as a Python module (skinrs[blender]; a 375 MB wheel, 1 GB installed) for the test that
@@ -50,6 +51,10 @@ lint: venv
 	cargo clippy --release -q --all-targets -- -D warnings
 	$(PY) -m ruff check python tests
 	$(PY) -m ruff format --check python tests
+	$(PY) -m mypy
+
+typecheck: venv
+	$(PY) -m mypy
 
 bench: build
 	$(PY) -m skinrs.bench bbw

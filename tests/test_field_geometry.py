@@ -301,7 +301,7 @@ def test_knn_distance_matches_kdtree(dim):
 
     rng = np.random.default_rng(8)
     X = rng.standard_normal((3000, dim)) * np.array([1.0, 0.3, 0.05][:dim])
-    d = skinrs.knn_distance(X, 9)
+    d = skinrs.knn_distance(X, k=9)
     ref = cKDTree(X).query(X, k=10)[0][:, 9]
     np.testing.assert_allclose(d, ref, rtol=0, atol=1e-12)
 
@@ -310,7 +310,7 @@ def test_knn_distance_on_surface_samples(data_dir):
     from scipy.spatial import cKDTree
 
     V, _ = _load(data_dir, "closed")
-    d = skinrs.knn_distance(V, 9)
+    d = skinrs.knn_distance(V, k=9)
     np.testing.assert_allclose(d, cKDTree(V).query(V, k=10)[0][:, 9], rtol=0, atol=1e-12)
 
 
@@ -337,9 +337,9 @@ def _square():
         (lambda V, E: skinrs.segment_visible(V, E, V, V[:2]), "same number of rows"),
         (lambda V, E: skinrs.closest_point(V[:0], E, V), "at least 1 rows"),
         (lambda V, E: skinrs.closest_point(V, E, "abc"), "Q must hold numbers"),
-        (lambda V, E: skinrs.knn_distance(V, 4), "k must be smaller"),
-        (lambda V, E: skinrs.knn_distance(V, 0), "k must be a positive integer"),
-        (lambda V, E: skinrs.knn_distance(np.zeros((5, 4)), 1), "X must have shape"),
+        (lambda V, E: skinrs.knn_distance(V, k=4), "k must be smaller"),
+        (lambda V, E: skinrs.knn_distance(V, k=0), "k must be a positive integer"),
+        (lambda V, E: skinrs.knn_distance(np.zeros((5, 4)), k=1), "X must have shape"),
     ],
 )
 def test_bad_input_raises_value_error(call, match):

@@ -183,7 +183,7 @@ def _pose(C, BE, seed):
 
 def test_blender_poses_the_glb_like_lbs(arm, tmp_path):
     V, F, C, BE, W = arm
-    packed = skinrs.reduce_weights(W, 4, "k-largest")
+    packed = skinrs.reduce_weights(W, 4, method="k-largest")
     poses = np.stack([_identity(len(BE)), _pose(C, BE, 1), _pose(C, BE, 2)])
     glb = tmp_path / "arm.glb"
     write_gltf(glb, V, F, packed, C, BE, poses=poses, times=[0.0, 0.5, 1.0])
@@ -239,7 +239,7 @@ def test_panda3d_poses_the_glb_like_lbs(arm, tmp_path):
     if importlib.util.find_spec("gltf") is None:
         pytest.skip("Panda3D check skipped: `make venv` installs panda3d and panda3d-gltf")
     V, F, C, BE, W = arm
-    packed = skinrs.reduce_weights(W, 4, "k-largest")
+    packed = skinrs.reduce_weights(W, 4, method="k-largest")
     write_gltf(tmp_path / "arm.glb", V, F, packed, C, BE)
     j = read_gltf(tmp_path / "arm.glb")["joints"]
     T = _pose(C, BE, 6)
@@ -272,7 +272,7 @@ def test_panda3d_poses_the_glb_like_lbs(arm, tmp_path):
 
 def test_round_trip_keeps_mesh_skeleton_weights_and_animation(arm, tmp_path):
     V, F, C, BE, W = arm
-    packed = skinrs.reduce_weights(W, 4, "k-largest")
+    packed = skinrs.reduce_weights(W, 4, method="k-largest")
     poses = np.stack([_identity(len(BE)), _pose(C, BE, 3)])
     names = [f"j{b}" for b in range(len(BE))]
     write_gltf(tmp_path / "arm.glb", V, F, packed, C, BE, poses=poses, names=names)
@@ -302,7 +302,7 @@ def test_more_than_k_columns_are_reduced_with_poisson_by_default(arm, tmp_path):
     write_gltf(tmp_path / "arm.gltf", V, F, W, C, BE, k=4)
     a = read_gltf(tmp_path / "arm.gltf")
     poses = skinrs.random_skeleton_poses(C, BE, 8, seed=0)
-    I, A = skinrs.reduce_weights(W, 4, "poisson", V=V, F=F, bone_transforms=poses)
+    I, A = skinrs.reduce_weights(W, 4, method="poisson", V=V, F=F, bone_transforms=poses)
     assert np.abs(a["W"] - skinrs.unpack_weights(I, A, len(BE))).max() <= 1e-6
     assert ((a["W"] > 0).sum(1) <= 4).all()
     # 8 influences: JOINTS_1 / WEIGHTS_1 hold the rest, nothing dropped
@@ -341,7 +341,7 @@ def test_an_existing_asset_keeps_its_joints_and_animation_when_reweighted(arm, t
         assert list(b["joints"][key]) == list(a["joints"][key])
     assert np.abs(b["joints"]["bind"] - a["joints"]["bind"]).max() <= 1e-6
     assert np.abs(b["animations"][0]["T"] - a["animations"][0]["T"]).max() <= 1e-5
-    I, A = skinrs.reduce_weights(W2, 4, "k-largest")
+    I, A = skinrs.reduce_weights(W2, 4, method="k-largest")
     assert np.abs(b["W"] - skinrs.unpack_weights(I, A, W2.shape[1])).max() <= 1e-6
 
 
@@ -372,7 +372,7 @@ def test_bad_input_is_named(arm, tmp_path):
             tmp_path / "a.glb", V, F, (np.zeros((len(V), 1), int), -np.ones((len(V), 1))), C, BE
         )
     with pytest.raises(ValueError, match="6 influences per vertex, more than k = 4"):
-        write_gltf(tmp_path / "a.glb", V, F, skinrs.reduce_weights(W, 6, "k-largest"), C, BE)
+        write_gltf(tmp_path / "a.glb", V, F, skinrs.reduce_weights(W, 6, method="k-largest"), C, BE)
     with pytest.raises(ValueError, match="poses must have shape"):
         write_gltf(tmp_path / "a.glb", V, F, W, C, BE, poses=np.zeros((2, 3, 3, 4)))
     assert not (tmp_path / "a.glb").exists()

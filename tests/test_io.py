@@ -102,7 +102,9 @@ def test_tgf_variants(tmp_path):
     np.testing.assert_array_equal(BE, [[0, 1], [1, 2]])
     np.testing.assert_array_equal(P, [3])  # joint 4 is referenced by no bone
     # no bone section at all, no final newline: every joint is a point handle
-    C, BE, P = sio.read_tgf(_write(tmp_path, "b.tgf", "1 0 0 0\n2 1 1 1"), True)
+    C, BE, P = sio.read_tgf(
+        _write(tmp_path, "b.tgf", "1 0 0 0\n2 1 1 1"), return_point_handles=True
+    )
     assert C.shape == (2, 3) and BE.shape == (0, 2)
     np.testing.assert_array_equal(P, [0, 1])
     C, BE = sio.read_tgf(_write(tmp_path, "c.tgf", "1 0 0 0\n2 1 1 1\n#\n"))

@@ -80,7 +80,7 @@ def test_cotan_laplacian_matches_igl(mesh):
 @pytest.mark.parametrize("kind", ["voronoi", "barycentric"])
 def test_massmatrix_matches_igl(mesh, kind):
     V, F = mesh
-    M = skinrs.massmatrix(V, F, kind)
+    M = skinrs.massmatrix(V, F, kind=kind)
     assert isinstance(M, sp.csc_matrix) and M.shape == (V.shape[0],) * 2
     assert (M - sp.diags(M.diagonal())).nnz == 0
     ref = igl_mass(V, F, kind)
@@ -104,12 +104,12 @@ def test_biharmonic_matches_scipy_product_of_igl_matrices(mesh, kind):
 
 def test_default_mass_is_voronoi(data_dir):
     V, F = load(data_dir, "knight-tets")
-    assert (skinrs.massmatrix(V, F) != skinrs.massmatrix(V, F, "voronoi")).nnz == 0
+    assert (skinrs.massmatrix(V, F) != skinrs.massmatrix(V, F, kind="voronoi")).nnz == 0
     B = skinrs.biharmonic_matrix(V, F)
     assert (B != skinrs.biharmonic_matrix(V, F, mass="voronoi")).nnz == 0
     # the two lumpings really differ on this mesh, so the tests above tell them apart
-    m_v = skinrs.massmatrix(V, F, "voronoi").diagonal()
-    m_b = skinrs.massmatrix(V, F, "barycentric").diagonal()
+    m_v = skinrs.massmatrix(V, F, kind="voronoi").diagonal()
+    m_b = skinrs.massmatrix(V, F, kind="barycentric").diagonal()
     assert np.abs(m_v - m_b).max() > 1e-3 * m_b.max()
 
 
@@ -121,7 +121,7 @@ def test_2d_orientation_does_not_matter(data_dir):
     assert rel_err(LG, L) < 1e-14
     assert rel_err(LG, igl.cotmatrix(V, G)) < TOL
     for kind in IGL_MASS:
-        mG = skinrs.massmatrix(V, G, kind).diagonal()
+        mG = skinrs.massmatrix(V, G, kind=kind).diagonal()
         assert np.abs(mG - igl_mass(V, G, kind)).max() / mG.max() < TOL
 
 
@@ -130,9 +130,9 @@ def test_small_hand_computed_cases():
     F = np.array([[0, 1, 2]])
     L = skinrs.cotan_laplacian(V, F).toarray()
     np.testing.assert_allclose(L, [[-1, 0.5, 0.5], [0.5, -0.5, 0], [0.5, 0, -0.5]], atol=1e-15)
-    m = skinrs.massmatrix(V, F, "voronoi").diagonal()
+    m = skinrs.massmatrix(V, F, kind="voronoi").diagonal()
     np.testing.assert_allclose(m, [0.25, 0.125, 0.125], rtol=1e-15)
-    m = skinrs.massmatrix(V, F, "barycentric").diagonal()
+    m = skinrs.massmatrix(V, F, kind="barycentric").diagonal()
     np.testing.assert_allclose(m, [1 / 6] * 3, rtol=1e-15)
     # An unused vertex gets an empty row/column and zero mass.
     V4 = np.vstack([V, [[3.0, 3.0]]])
@@ -220,7 +220,7 @@ def test_bad_mass_kind():
     V = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
     F = np.array([[0, 1, 2]])
     with pytest.raises(ValueError, match="voronoi"):
-        skinrs.massmatrix(V, F, "full")
+        skinrs.massmatrix(V, F, kind="full")
     with pytest.raises(ValueError, match="mass"):
         skinrs.biharmonic_matrix(V, F, mass=1)
 

@@ -15,8 +15,8 @@ import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 import skinrs
-from skinrs import _skinrs
-from skinrs.reduce import deform, forward_kinematics, vertex_normals
+from skinrs import _skinrs, forward_kinematics, per_vertex_normals
+from skinrs.reduce import deform
 
 # ----------------------------------------------------------------------------- fixtures
 
@@ -114,7 +114,7 @@ def test_lbs_matches_gpytoolbox(arm):
     for j in range(3):
         ref = gpytoolbox.linear_blend_skinning(V, W, T[j, :, :, :3], T[j, :, :, 3])
         assert np.abs(X[j] - ref).max() < 1e-12
-    I, A = skinrs.reduce_weights(W, 2, "k-largest")
+    I, A = skinrs.reduce_weights(W, 2, method="k-largest")
     Xr = deform(V, (I, A), bone_transforms=T[1])
     ref = gpytoolbox.linear_blend_skinning(
         V, skinrs.unpack_weights(I, A, 4), T[1, :, :, :3], T[1, :, :, 3]
@@ -239,7 +239,7 @@ def test_k_equals_m_reproduces_every_example_pose(tube_rig, method, energy, nonn
     P = np.random.default_rng(2).normal(size=(3, m, 3))
     for kw in ({"bone_transforms": T}, {"control_points": P}):
         I, A = skinrs.reduce_weights(
-            W, m, method, V=V, F=F, energy=energy, nonnegative=nonneg, **kw
+            W, m, method=method, V=V, F=F, energy=energy, nonnegative=nonneg, **kw
         )
         check_constraints(W, I, A, m, nonneg=nonneg)
         assert np.abs(deform(V, (I, A), **kw) - deform(V, W, **kw)).max() < 1e-8
@@ -250,7 +250,9 @@ def test_k_equals_m_reproduces_every_example_pose(tube_rig, method, energy, nonn
 def test_constraints_hold(tube_rig, method, nonneg):
     V, F, W, C, BE = tube_rig
     T = bone_poses(C, BE, 3, seed=4)
-    I, A = skinrs.reduce_weights(W, 2, method, V=V, F=F, bone_transforms=T, nonnegative=nonneg)
+    I, A = skinrs.reduce_weights(
+        W, 2, method=method, V=V, F=F, bone_transforms=T, nonnegative=nonneg
+    )
     check_constraints(W, I, A, 2, nonneg)
 
 
@@ -268,7 +270,7 @@ def test_smooth_cage_weights_keep_linear_precision():
     A_eq = np.vstack([Cc.T, np.ones(len(Cc))])
     W = W0 + (np.linalg.pinv(A_eq) @ (np.vstack([V.T, np.ones(len(V))]) - A_eq @ W0.T)).T
     assert np.abs(W @ Cc - V).max() < 1e-12
-    I, A = skinrs.reduce_weights(W, 6, "smooth", V=V, F=F, C=Cc, nonnegative=False)
+    I, A = skinrs.reduce_weights(W, 6, method="smooth", V=V, F=F, C=Cc, nonnegative=False)
     check_constraints(W, I, A, 6, nonneg=False)
     assert np.abs(np.einsum("nk,nkd->nd", A, Cc[I]) - V).max() < 1e-10
 
@@ -295,7 +297,16 @@ def test_objective_never_increases(tube_rig, method, kw):
     V, F, W, C, BE = tube_rig
     T = bone_poses(C, BE, 3, seed=6)
     _, _, info = skinrs.reduce_weights(
-        W, 2, method, V=V, F=F, bone_transforms=T, return_info=True, max_sweeps=300, tol=1e-9, **kw
+        W,
+        2,
+        method=method,
+        V=V,
+        F=F,
+        bone_transforms=T,
+        return_info=True,
+        max_sweeps=300,
+        tol=1e-9,
+        **kw,
     )
     h = info.objective
     assert len(h) > 5 and h[-1] < h[0]
@@ -376,7 +387,7 @@ def test_converged_poisson_matches_direct_sparse_solve(tube_rig, energy, solver)
     I, A, info = skinrs.reduce_weights(
         W,
         2,
-        "poisson",
+        method="poisson",
         V=V,
         F=F,
         bone_transforms=T,
@@ -408,7 +419,7 @@ def test_real_rig_heldout_poses_follow_paper_ordering(request, rig, k):
     held_out = bone_poses(C, BE, 8, seed=2)
     err = {}
     for method in ("k-largest", "geometric", "poisson", "smooth"):
-        I, A = skinrs.reduce_weights(W, k, method, V=V, F=F, bone_transforms=fit)
+        I, A = skinrs.reduce_weights(W, k, method=method, V=V, F=F, bone_transforms=fit)
         check_constraints(W, I, A, k, nonneg=True)
         err[method] = skinrs.reduction_error(V, F, W, (I, A), bone_transforms=held_out)
     normal = {m: e.normal_rms_all for m, e in err.items()}
@@ -427,11 +438,11 @@ def area_normals(X, F):
 def test_normal_transform_is_exact_for_affine_motion(tube_rig):
     V, F, W = tube_rig[:3]
     N = area_normals(V, F)
-    assert np.abs(vertex_normals(V, F) - N).max() < 1e-12
+    assert np.abs(per_vertex_normals(V, F) - N).max() < 1e-12
     rng = np.random.default_rng(9)
     Aff = np.hstack([np.eye(3) + 0.4 * rng.normal(size=(3, 3)), rng.normal(size=(3, 1))])
     assert np.linalg.det(Aff[:, :3]) > 0
-    I, A = skinrs.reduce_weights(W, 3, "k-largest")
+    I, A = skinrs.reduce_weights(W, 3, method="k-largest")
     # Skeleton: every bone moves by the same affine map.
     T = np.broadcast_to(Aff, (W.shape[1], 3, 4))
     Nt = skinrs.transform_normals(N, (I, A), bone_transforms=T)
@@ -440,7 +451,7 @@ def test_normal_transform_is_exact_for_affine_motion(tube_rig):
     Cc = rng.normal(size=(5, 3)) * 3
     P = Cc @ Aff[:, :3].T + Aff[:, 3]
     Wc = smooth_weights(V, Cc, 3.0)
-    Ic, Ac = skinrs.reduce_weights(Wc, 4, "k-largest")
+    Ic, Ac = skinrs.reduce_weights(Wc, 4, method="k-largest")
     Nc = skinrs.transform_normals(N, (Ic, Ac), control_points=P, C=Cc)
     assert np.abs(Nc - area_normals(V @ Aff[:, :3].T + Aff[:, 3], F)).max() < 1e-10
 
@@ -451,7 +462,7 @@ def test_normal_transform_approximates_recomputed_normals(hand):
     closer than leaving the rest normals as they are."""
     V, F, W, C, BE = hand
     T = bone_poses(C, BE, 3, seed=10)
-    I, A = skinrs.reduce_weights(W, 4, "poisson", V=V, F=F, bone_transforms=T)
+    I, A = skinrs.reduce_weights(W, 4, method="poisson", V=V, F=F, bone_transforms=T)
     N = area_normals(V, F)
     Nt = skinrs.transform_normals(N, (I, A), bone_transforms=T)
     X = deform(V, (I, A), bone_transforms=T)
@@ -474,7 +485,7 @@ def test_normal_transform_approximates_recomputed_normals(hand):
 def test_reduction_error_matches_numpy(arm):
     V, F, W, C, BE = arm
     T = bone_poses(C, BE, 2, seed=13)
-    I, A = skinrs.reduce_weights(W, 2, "k-largest")
+    I, A = skinrs.reduce_weights(W, 2, method="k-largest")
     e = skinrs.reduction_error(V, F, W, (I, A), bone_transforms=T)
     for j in range(2):
         Xf = gpytoolbox.linear_blend_skinning(V, W, T[j, :, :, :3], T[j, :, :, 3])
@@ -506,71 +517,93 @@ def test_bad_input_is_rejected(tube_rig):
     T = bone_poses(C, BE, 2, seed=0)
     ok = {"V": V, "F": F, "bone_transforms": T}
     cases = [
-        (lambda: skinrs.reduce_weights(W, 0, "poisson", **ok), "k must be"),
-        (lambda: skinrs.reduce_weights(W, 5, "poisson", **ok), "k must be between 1"),
+        (lambda: skinrs.reduce_weights(W, 0, method="poisson", **ok), "k must be"),
+        (lambda: skinrs.reduce_weights(W, 5, method="poisson", **ok), "k must be between 1"),
         (
-            lambda: skinrs.reduce_weights(np.where(W == W[3, 1], np.nan, W), 2, "poisson", **ok),
+            lambda: skinrs.reduce_weights(
+                np.where(W == W[3, 1], np.nan, W), 2, method="poisson", **ok
+            ),
             "NaN",
         ),
-        (lambda: skinrs.reduce_weights(W * 1.01, 2, "poisson", **ok), "sums to"),
+        (lambda: skinrs.reduce_weights(W * 1.01, 2, method="poisson", **ok), "sums to"),
         (
-            lambda: skinrs.reduce_weights(W, 2, "poisson", V=V, F=F, bone_transforms=T[:, :3]),
+            lambda: skinrs.reduce_weights(
+                W, 2, method="poisson", V=V, F=F, bone_transforms=T[:, :3]
+            ),
             "bone_transforms must have shape",
         ),
         (
             lambda: skinrs.reduce_weights(
-                W, 2, "geometric", V=V, control_points=np.zeros((2, 4, 2))
+                W, 2, method="geometric", V=V, control_points=np.zeros((2, 4, 2))
             ),
             "control_points must have shape",
         ),
-        (lambda: skinrs.reduce_weights(W, 2, "poisson", V=V, F=F), "example poses"),
-        (lambda: skinrs.reduce_weights(W, 2, "poisson", V=V, bone_transforms=T), "triangles F"),
+        (lambda: skinrs.reduce_weights(W, 2, method="poisson", V=V, F=F), "example poses"),
+        (
+            lambda: skinrs.reduce_weights(W, 2, method="poisson", V=V, bone_transforms=T),
+            "triangles F",
+        ),
         (
             lambda: skinrs.reduce_weights(
-                W, 2, "poisson", V=V, F=F, bone_transforms=T, control_points=np.zeros((1, 4, 3))
+                W,
+                2,
+                method="poisson",
+                V=V,
+                F=F,
+                bone_transforms=T,
+                control_points=np.zeros((1, 4, 3)),
             ),
             "not both",
         ),
-        (lambda: skinrs.reduce_weights(W, 2, "fancy", **ok), "method must be"),
-        (lambda: skinrs.reduce_weights(W, 2, "poisson", energy="x", **ok), "energy must be"),
-        (lambda: skinrs.reduce_weights(W, 2, "poisson", solver="x", **ok), "solver must be"),
+        (lambda: skinrs.reduce_weights(W, 2, method="fancy", **ok), "method must be"),
+        (lambda: skinrs.reduce_weights(W, 2, method="poisson", energy="x", **ok), "energy must be"),
+        (lambda: skinrs.reduce_weights(W, 2, method="poisson", solver="x", **ok), "solver must be"),
         (
-            lambda: skinrs.reduce_weights(W, 2, "poisson", solver="cg", nonnegative=True, **ok),
+            lambda: skinrs.reduce_weights(
+                W, 2, method="poisson", solver="cg", nonnegative=True, **ok
+            ),
             "solver='cg' needs",
         ),
-        (lambda: skinrs.reduce_weights(W, 2.5, "poisson", **ok), "k must"),
+        (lambda: skinrs.reduce_weights(W, 2.5, method="poisson", **ok), "k must"),
         (
             lambda: skinrs.reduce_weights(
-                W, 2, "poisson", V=V, F=F, bone_transforms=np.where(T == T[0, 0, 0, 0], np.nan, T)
+                W,
+                2,
+                method="poisson",
+                V=V,
+                F=F,
+                bone_transforms=np.where(T == T[0, 0, 0, 0], np.nan, T),
             ),
             "NaN",
         ),
         (
             lambda: skinrs.reduce_weights(
-                W, 2, "geometric", V=V, control_points=np.full((2, 4, 3), np.inf)
+                W, 2, method="geometric", V=V, control_points=np.full((2, 4, 3), np.inf)
             ),
             "NaN",
         ),
-        (lambda: skinrs.reduce_weights(W, 2, "smooth", V=V * np.nan, F=F), "NaN"),
-        (lambda: skinrs.reduce_weights(W, 2, "poisson", relaxation=2.5, **ok), "relaxation"),
-        (lambda: skinrs.reduce_weights(W[:-1], 2, "poisson", **ok), "one row per row of W"),
+        (lambda: skinrs.reduce_weights(W, 2, method="smooth", V=V * np.nan, F=F), "NaN"),
+        (lambda: skinrs.reduce_weights(W, 2, method="poisson", relaxation=2.5, **ok), "relaxation"),
+        (lambda: skinrs.reduce_weights(W[:-1], 2, method="poisson", **ok), "one row per row of W"),
         (
-            lambda: skinrs.reduce_weights(W, 2, "smooth", V=V, F=F, C=np.zeros((3, 3))),
+            lambda: skinrs.reduce_weights(W, 2, method="smooth", V=V, F=F, C=np.zeros((3, 3))),
             "C must have shape",
         ),
         (
-            lambda: skinrs.reduce_weights(W, 2, "geometric", V=V, C=C[:4], bone_transforms=T),
+            lambda: skinrs.reduce_weights(
+                W, 2, method="geometric", V=V, C=C[:4], bone_transforms=T
+            ),
             "smooth method only",
         ),
         (
             lambda: skinrs.reduce_weights(
-                [[0.7, 0.5, -0.1, -0.1]], 3, "k-largest", nonnegative=True
+                [[0.7, 0.5, -0.1, -0.1]], 3, method="k-largest", nonnegative=True
             ),
             "negative weight",
         ),
         (
             lambda: skinrs.reduce_weights(
-                W, 2, "poisson", V=V, F=np.vstack([F, [[0, 1, 1]]]), bone_transforms=T
+                W, 2, method="poisson", V=V, F=np.vstack([F, [[0, 1, 1]]]), bone_transforms=T
             ),
             "repeats a vertex",
         ),
@@ -589,11 +622,11 @@ def test_bad_input_is_rejected(tube_rig):
     Vd = V.copy()
     Vd[F[0, 2]] = (Vd[F[0, 0]] + Vd[F[0, 1]]) / 2
     with pytest.raises(ValueError, match="degenerate"):
-        skinrs.reduce_weights(W, 2, "poisson", V=Vd, F=F, bone_transforms=T)
+        skinrs.reduce_weights(W, 2, method="poisson", V=Vd, F=F, bone_transforms=T)
     with pytest.raises(ValueError, match="not used by any triangle"):
-        skinrs.reduce_weights(W, 2, "smooth", V=V, F=F[F.max(1) < len(V) - 1])
+        skinrs.reduce_weights(W, 2, method="smooth", V=V, F=F[F.max(1) < len(V) - 1])
     # linear precision with non-negativity where a vertex is outside its control points' hull
     Cc = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [5, 5, 5]])
     Wl = smooth_weights(V, Cc, 2.0)
     with pytest.raises(ValueError, match="convex hull"):
-        skinrs.reduce_weights(Wl, 4, "smooth", V=V, F=F, C=Cc, nonnegative=True)
+        skinrs.reduce_weights(Wl, 4, method="smooth", V=V, F=F, C=Cc, nonnegative=True)

@@ -6,7 +6,8 @@
 >>> W = skinrs.bbw_dual(V, T, C, BE=BE)               # doctest: +SKIP
 """
 
-from . import field, io
+from . import _skinrs, field, io
+from ._info import Info
 from .bbw import bbw_dual, bbw_dual_constrained, biharmonic_energy, boundary_conditions
 from .field import (
     GeometricField,
@@ -34,10 +35,11 @@ from .skinning import (
     quaternions_from_xyzw,
 )
 
-__version__ = "0.1.0"
+__version__: str = _skinrs.__version__
 
 __all__ = [
     "GeometricField",
+    "Info",
     "MeshingWarning",
     "bbw_dual",
     "bbw_dual_constrained",

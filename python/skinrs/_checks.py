@@ -9,11 +9,19 @@ from __future__ import annotations
 
 import sys
 import time
+from collections.abc import Callable, Iterable, Sequence
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+#: ``callback(stage, iteration, value)`` of a long job; returning ``False`` stops it.
+Callback = Callable[[str, int, float], "bool | None"]
 
 
-def as_points(X, name: str = "V", dims=(2, 3), min_rows: int = 1) -> np.ndarray:
+def as_points(
+    X: ArrayLike, name: str = "V", dims: Iterable[int] = (2, 3), min_rows: int = 1
+) -> NDArray[np.float64]:
     """Float64 C-contiguous ``(n, d)`` array with ``d`` in ``dims`` and only finite entries."""
     try:
         A = np.asarray(X)
@@ -35,7 +43,14 @@ def as_points(X, name: str = "V", dims=(2, 3), min_rows: int = 1) -> np.ndarray:
     return A
 
 
-def as_index_array(X, n: int, name: str, cols=None, ndim: int = 2, allow_empty=True) -> np.ndarray:
+def as_index_array(
+    X: ArrayLike,
+    n: int,
+    name: str,
+    cols: int | Sequence[int] | None = None,
+    ndim: int = 2,
+    allow_empty: bool = True,
+) -> NDArray[np.int64]:
     """Int64 C-contiguous index array with every entry in ``0..n``.
 
     ``cols`` (an int or tuple of ints) restricts the number of columns of a 2D array.
@@ -69,7 +84,9 @@ def as_index_array(X, n: int, name: str, cols=None, ndim: int = 2, allow_empty=T
     return A
 
 
-def as_elements(F, V: np.ndarray, name: str = "F", cols=(3, 4)) -> np.ndarray:
+def as_elements(
+    F: ArrayLike, V: NDArray[np.float64], name: str = "F", cols: int | Sequence[int] = (3, 4)
+) -> NDArray[np.int64]:
     """Int64 ``(k, s)`` element array referencing rows of ``V``; no repeated vertex in an element."""
     A = as_index_array(F, V.shape[0], name, cols=cols, allow_empty=False)
     s = np.sort(A, axis=1)
@@ -82,7 +99,7 @@ def as_elements(F, V: np.ndarray, name: str = "F", cols=(3, 4)) -> np.ndarray:
     return A
 
 
-def as_weights(W, n: int | None = None, name: str = "W") -> np.ndarray:
+def as_weights(W: ArrayLike, n: int | None = None, name: str = "W") -> NDArray[np.float64]:
     """Float64 ``(n, m)`` finite weight matrix."""
     A = as_points(W, name=name, dims=range(1, 1 << 30))
     if n is not None and A.shape[0] != n:
@@ -90,13 +107,13 @@ def as_weights(W, n: int | None = None, name: str = "W") -> np.ndarray:
     return A
 
 
-def positive_int(x, name: str) -> int:
+def positive_int(x: Any, name: str) -> int:
     if isinstance(x, bool) or not isinstance(x, (int, np.integer)) or x < 1:
         raise ValueError(f"{name} must be a positive integer, got {x!r}")
     return int(x)
 
 
-def positive_float(x, name: str) -> float:
+def positive_float(x: Any, name: str) -> float:
     try:
         f = float(x)
     except (TypeError, ValueError):
@@ -106,7 +123,12 @@ def positive_float(x, name: str) -> float:
     return f
 
 
-def progress_printer(verbose, callback, describe, every=1.0):
+def progress_printer(
+    verbose: bool,
+    callback: Callback | None,
+    describe: Callable[[str, int, float], str],
+    every: float = 1.0,
+) -> Callback | None:
     """The ``callback(stage, iteration, value)`` a long Rust job reports to: with ``verbose``,
     print ``describe(stage, iteration, value)`` to stderr at most every ``every`` seconds, then
     forward to the user's ``callback`` (whose ``False`` stops the job)."""
@@ -114,7 +136,7 @@ def progress_printer(verbose, callback, describe, every=1.0):
         return callback
     last = [0.0]
 
-    def cb(stage, iteration, value):
+    def cb(stage: str, iteration: int, value: float) -> bool | None:
         now = time.perf_counter()
         if now - last[0] > every:
             last[0] = now

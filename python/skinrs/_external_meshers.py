@@ -9,8 +9,11 @@ from __future__ import annotations
 import contextlib
 import os
 import sys
+from collections.abc import Iterator
+from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from ._tet_edit import _tet_volumes
 
@@ -18,7 +21,7 @@ _INSTALL = "install the optional meshing packages with `pip install skinrs[mesh]
 
 
 @contextlib.contextmanager
-def _quiet_fd1(quiet: bool):
+def _quiet_fd1(quiet: bool) -> Iterator[None]:
     """Silences C-level prints to stdout (the tetgen wrapper prints even with "Q")."""
     if not quiet:
         yield
@@ -43,7 +46,7 @@ _LITTER = ("tetgen-tmpfile_skipped.face", "tetgen-tmpfile_skipped.node", "__trac
 
 
 @contextlib.contextmanager
-def _no_litter():
+def _no_litter() -> Iterator[None]:
     """Removes the scratch files the meshers leave in the working directory (only those the
     call created: a file of that name that was there before is left alone)."""
     before = {f for f in _LITTER if os.path.exists(f)}
@@ -55,7 +58,7 @@ def _no_litter():
                 os.remove(f)
 
 
-def _import_tetgen():
+def _import_tetgen() -> Any:
     try:
         import tetgen
     except ImportError:
@@ -63,7 +66,9 @@ def _import_tetgen():
     return tetgen
 
 
-def _tetgen(V, F, S, flags: str, verbose: bool):
+def _tetgen(
+    V: NDArray[Any], F: NDArray[Any], S: NDArray[Any], flags: str, verbose: bool
+) -> tuple[NDArray[Any], NDArray[Any]]:
     tetgen = _import_tetgen()
     if not verbose and "Q" not in flags:
         flags += "Q"
@@ -75,7 +80,7 @@ def _tetgen(V, F, S, flags: str, verbose: bool):
     return np.array(VV, dtype=np.float64, copy=True), np.array(TT, dtype=np.int64, copy=True)
 
 
-def _self_intersects(V, F) -> bool:
+def _self_intersects(V: NDArray[Any], F: NDArray[Any]) -> bool:
     """Whether TetGen finds intersecting faces in the surface alone (switch ``d``).
 
     Checked before the real TetGen run because TetGen, given a self-intersecting surface *and*
@@ -91,7 +96,9 @@ def _self_intersects(V, F) -> bool:
     return False
 
 
-def _tetwild(V, F, S, verbose: bool, **options):
+def _tetwild(
+    V: NDArray[Any], F: NDArray[Any], S: NDArray[Any], verbose: bool, **options: Any
+) -> tuple[NDArray[Any], NDArray[Any]]:
     """Fallback mesher: fTetWild (robust to self-intersections and holes). Does not keep the
     input vertices or insert points, so the caller meshes its boundary again or snaps vertices
     onto the samples. ``options`` go to ``pytetwild.tetrahedralize``. Tets come back positively
@@ -99,7 +106,7 @@ def _tetwild(V, F, S, verbose: bool, **options):
     import pytetwild  # ImportError when missing (also raised when its pyvista dependency is)
 
     with _no_litter():
-        VV, TT = pytetwild.tetrahedralize(
+        VV, TT = pytetwild.tetrahedralize(  # type: ignore[attr-defined]
             np.asarray(V, float), np.asarray(F, np.int32), quiet=not verbose, **options
         )
     VV, TT = np.array(VV, dtype=np.float64), np.array(TT, dtype=np.int64)
@@ -108,7 +115,14 @@ def _tetwild(V, F, S, verbose: bool, **options):
     return VV, TT
 
 
-def _triangle(V, E, S, seg_S, flags: str, verbose: bool):
+def _triangle(
+    V: NDArray[Any],
+    E: NDArray[Any],
+    S: NDArray[Any],
+    seg_S: NDArray[Any],
+    flags: str,
+    verbose: bool,
+) -> tuple[NDArray[Any], NDArray[Any]]:
     try:
         import triangle
     except ImportError:

@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 
-def _mean_edge_length(V, F) -> float:
+def _mean_edge_length(V: NDArray[Any], F: NDArray[Any]) -> float:
     E = (
         np.vstack([F[:, [i, (i + 1) % F.shape[1]]] for i in range(F.shape[1])])
         if F.shape[1] > 2
@@ -15,7 +18,14 @@ def _mean_edge_length(V, F) -> float:
     return float(np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1).mean())
 
 
-def sample_skeleton(C, BE=None, P=None, spacing: float = 1.0, min_samples: int = 2):
+def sample_skeleton(
+    C: ArrayLike,
+    BE: ArrayLike | None = None,
+    P: ArrayLike | None = None,
+    *,
+    spacing: float = 1.0,
+    min_samples: int = 2,
+) -> tuple[NDArray[np.float64], list[list[int]]]:
     """Points on the handles: each point handle, and each bone sampled every ``spacing``.
 
     Returns ``S (s, d)`` sample positions and ``handles``: a list (one per sample) of the
@@ -49,7 +59,7 @@ def sample_skeleton(C, BE=None, P=None, spacing: float = 1.0, min_samples: int =
     return uniq, handles
 
 
-def _bc_matrix(handles, m: int) -> np.ndarray:
+def _bc_matrix(handles: list[list[int]], m: int) -> NDArray[np.float64]:
     bc = np.zeros((len(handles), m))
     for r, hs in enumerate(handles):
         bc[r, hs] = 1.0 / len(hs)  # a joint is shared equally by the bones meeting there

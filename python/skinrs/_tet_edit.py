@@ -5,26 +5,33 @@ Used after fTetWild, whose meshes keep neither the input vertices nor the handle
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
+from numpy.typing import NDArray
 
 
-def _tet_volumes(V, T):
+def _tet_volumes(V: NDArray[Any], T: NDArray[Any]) -> NDArray[Any]:
     X = V[T]
     a, b, c = X[:, 1] - X[:, 0], X[:, 2] - X[:, 0], X[:, 3] - X[:, 0]
-    return np.einsum("ij,ij->i", a, np.cross(b, c)) / 6.0
+    volumes: NDArray[Any] = np.einsum("ij,ij->i", a, np.cross(b, c)) / 6.0
+    return volumes
 
 
 # The faces of a positively oriented tet, each opposite one corner and oriented outward.
 _TET_FACES = [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]]
 
 
-def _boundary_faces(T):
+def _boundary_faces(T: NDArray[Any]) -> NDArray[Any]:
     faces = T[:, _TET_FACES].reshape(-1, 3)
     _, inv, cnt = np.unique(np.sort(faces, axis=1), axis=0, return_inverse=True, return_counts=True)
-    return faces[cnt[inv.reshape(-1)] == 1]
+    boundary: NDArray[Any] = faces[cnt[inv.reshape(-1)] == 1]
+    return boundary
 
 
-def _snap(Vw, Tw, S, k: int = 32):
+def _snap(
+    Vw: NDArray[Any], Tw: NDArray[Any], S: NDArray[Any], k: int = 32
+) -> tuple[NDArray[Any], NDArray[Any], NDArray[Any], NDArray[Any]]:
     """Puts a vertex of ``(Vw, Tw)`` exactly on each sample.
 
     First, greedily by distance, a distinct interior vertex is moved onto each sample, nearest
@@ -72,7 +79,9 @@ def _snap(Vw, Tw, S, k: int = 32):
     return Vv, T, idx, dist
 
 
-def _insert_vertex(V, T, p, vmin: float, max_tets: int = 64):
+def _insert_vertex(
+    V: NDArray[Any], T: NDArray[Any], p: NDArray[Any], vmin: float, max_tets: int = 64
+) -> tuple[NDArray[Any], NDArray[Any], int]:
     """Inserts the point ``p`` as a new vertex of the tet mesh ``(V, T)`` (positively oriented).
 
     The tets of a cavity around ``p`` are replaced by the fan from ``p`` to the cavity's
@@ -85,7 +94,7 @@ def _insert_vertex(V, T, p, vmin: float, max_tets: int = 64):
     key = np.sort(faces, axis=2).reshape(-1, 3)
     _, face_id = np.unique(key, axis=0, return_inverse=True)
     face_id = face_id.reshape(-1, 4)
-    tets_of_face = {}
+    tets_of_face: dict[int, list[int]] = {}
     for t, f in zip(np.repeat(np.arange(len(T)), 4), face_id.ravel(), strict=True):
         tets_of_face.setdefault(int(f), []).append(int(t))
     cavity = {_containing_tet(V, T, p)}
@@ -113,7 +122,7 @@ def _insert_vertex(V, T, p, vmin: float, max_tets: int = 64):
     return Vn, np.vstack([T[keep], fan]).astype(T.dtype), q
 
 
-def _barycentric(V, T, p):
+def _barycentric(V: NDArray[Any], T: NDArray[Any], p: NDArray[Any]) -> NDArray[Any]:
     """Barycentric coordinates ``(m, 4)`` of the point ``p`` in each tet of ``(V, T)``; rows of
     flat tets are ``-inf``."""
     X = V[T]
@@ -125,7 +134,7 @@ def _barycentric(V, T, p):
     return lam
 
 
-def _containing_tet(V, T, p) -> int:
+def _containing_tet(V: NDArray[Any], T: NDArray[Any], p: NDArray[Any]) -> int:
     """The tet of ``(V, T)`` whose smallest barycentric coordinate of ``p`` is largest."""
     lam = _barycentric(V, T, p)
     t = int(np.argmax(lam.min(axis=1)))

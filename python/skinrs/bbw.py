@@ -17,20 +17,34 @@ from __future__ import annotations
 import sys
 import time
 import warnings
+from typing import Any
 
 import numpy as np
+import scipy.sparse as sp
+from numpy.typing import ArrayLike, NDArray
 
 from . import _checks, _skinrs
+from ._checks import Callback
+from ._info import Info
 from .operators import biharmonic_matrix
 
 #: Distance tolerance of ``boundary_conditions``, relative to the bounding-box diagonal. On
 #: unit-size meshes it equals libigl's test ``squared distance <= 1e-7``.
-DEFAULT_BC_TOL = 3.1622776601683795e-4
+DEFAULT_BC_TOL: float = _skinrs.BOUNDARY_TOL
 
-SOLVERS = ("active-set", "lbfgs-squared")
+#: The solvers of ``bbw_dual_constrained`` and the defaults of its options (from the Rust core).
+SOLVERS: tuple[str, ...] = _skinrs.BBW_SOLVERS
+_DEFAULTS: dict[str, Any] = _skinrs.BBW_DEFAULTS
 
 
-def boundary_conditions(V, C, P=None, BE=None, *, tol=DEFAULT_BC_TOL):
+def boundary_conditions(
+    V: ArrayLike,
+    C: ArrayLike,
+    BE: ArrayLike | None = None,
+    P: ArrayLike | None = None,
+    *,
+    tol: float = DEFAULT_BC_TOL,
+) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
     """Constrained vertices and their values from point handles and bones.
 
     A vertex within ``tol * bbox_diagonal(V)`` of point handle ``C[P[k]]`` is held at 1 in
@@ -43,8 +57,10 @@ def boundary_conditions(V, C, P=None, BE=None, *, tol=DEFAULT_BC_TOL):
     V : (n, d) float array, d = 2 or 3
     C : (h, d) float array of control points / joints (a 3-column ``C`` with z = 0 is accepted
         for 2D ``V``)
-    P : (p,) int array of point-handle indices into ``C``, optional
     BE : (k, 2) int array of bone edges into ``C``, optional
+    P : (p,) int array of point-handle indices into ``C``, optional
+    tol : float
+        Distance tolerance relative to the bounding-box diagonal of ``V``.
 
     Returns
     -------
@@ -82,30 +98,30 @@ def boundary_conditions(V, C, P=None, BE=None, *, tol=DEFAULT_BC_TOL):
     return _skinrs._boundary_conditions(V, C, P, BE, tol)
 
 
-def biharmonic_energy(W, B):
+def biharmonic_energy(W: ArrayLike, B: sp.spmatrix | sp.sparray) -> float:
     """``1/2 tr(W^T B W)``, the BBW objective (paper eq. 3), for ``W (n, m)`` and sparse ``B``."""
     W = np.asarray(W, dtype=np.float64)
     return 0.5 * float(np.einsum("ij,ij->", W, B @ W))
 
 
 def bbw_dual_constrained(
-    V,
-    T,
-    b,
-    bc,
+    V: ArrayLike,
+    T: ArrayLike,
+    b: ArrayLike,
+    bc: ArrayLike,
     *,
-    partition_of_unity=True,
-    normalize=True,
-    mass="voronoi",
-    solver="active-set",
-    tol=1e-9,
-    max_iter=100_000,
-    seed=0,
-    lbfgs_memory=10,
-    verbose=False,
-    callback=None,
-    return_info=False,
-):
+    partition_of_unity: bool = _DEFAULTS["partition_of_unity"],
+    normalize: bool = True,
+    mass: str = "voronoi",
+    solver: str = _DEFAULTS["solver"],
+    tol: float = _DEFAULTS["tol"],
+    max_iter: int = _DEFAULTS["max_iter"],
+    seed: int = _DEFAULTS["seed"],
+    lbfgs_memory: int = _DEFAULTS["lbfgs_memory"],
+    verbose: bool = False,
+    callback: Callback | None = None,
+    return_info: bool = False,
+) -> NDArray[np.float64] | tuple[NDArray[np.float64], Info]:
     """Exact BBW for user-given constraints ``W[b] = bc``.
 
     Parameters
@@ -150,12 +166,12 @@ def bbw_dual_constrained(
         conjugate gradients (``"active-set cg"``);
         returning ``False`` stops the solve (raises ``KeyboardInterrupt``). Ctrl-C also stops it.
     return_info : bool
-        Also return a dict of diagnostics: solver, iterations and evaluations (L-BFGS),
-        rounds, cg_iterations and fallbacks (active set: rounds, CG iterations in them, and
-        hand-overs to L-BFGS when the rounds stall), energy, lower_bound, gap, relative_gap,
-        dual_objective, min_raw_weight, max_raw_weight, converged, and seconds per phase:
-        time_operators, time_factor, time_solve and within it time_lbfgs, time_active_set
-        (of which time_support_factor and time_cg).
+        Also return an :class:`skinrs.Info` of diagnostics: solver, iterations and evaluations
+        (L-BFGS), rounds, cg_iterations and fallbacks (active set: rounds, CG iterations in
+        them, and hand-overs to L-BFGS when the rounds stall), energy, lower_bound, gap,
+        relative_gap, dual_objective, min_raw_weight, max_raw_weight, converged, seconds (the
+        whole call) and seconds per phase: time_operators, time_factor, time_solve and within it
+        time_lbfgs, time_active_set (of which time_support_factor and time_cg).
 
     Returns
     -------
@@ -211,22 +227,22 @@ def bbw_dual_constrained(
     B.sort_indices()
     t_ops = time.perf_counter() - t0
     cb = _checks.progress_printer(verbose, callback, _describe)
-    W, info = _skinrs._bbw_dual(
+    W, raw = _skinrs._bbw_dual(
         B.data,
         B.indices.astype(np.int64),
         B.indptr.astype(np.int64),
         n,
         b,
         bc,
-        solver,
-        tol,
-        max_iter,
-        bool(partition_of_unity),
-        int(seed),
-        int(lbfgs_memory),
-        cb,
+        solver=solver,
+        tol=tol,
+        max_iter=max_iter,
+        partition_of_unity=bool(partition_of_unity),
+        seed=int(seed),
+        lbfgs_memory=int(lbfgs_memory),
+        callback=cb,
     )
-    info["time_operators"] = t_ops
+    info = Info(raw, time_operators=t_ops)
     if not info["converged"]:
         warnings.warn(
             f"bbw_dual stopped after {info['iterations']} iterations with relative duality gap "
@@ -240,6 +256,7 @@ def bbw_dual_constrained(
             r = int(np.flatnonzero(s[:, 0] <= 0)[0])
             raise ValueError(f"vertex {r} has all-zero weights and cannot be normalised")
         W = W / s
+    info["seconds"] = time.perf_counter() - t0
     if verbose:
         print(
             f"skinrs.bbw_dual: {info['solver']}, {info['iterations']} iterations, energy "
@@ -250,13 +267,32 @@ def bbw_dual_constrained(
     return (W, info) if return_info else W
 
 
-def bbw_dual(V, T, C, BE=None, P=None, *, bc_tol=DEFAULT_BC_TOL, **options):
-    """Exact bounded biharmonic weights for point handles ``P`` and bones ``BE``.
+def bbw_dual(
+    V: ArrayLike,
+    T: ArrayLike,
+    C: ArrayLike,
+    BE: ArrayLike | None = None,
+    P: ArrayLike | None = None,
+    *,
+    bc_tol: float = DEFAULT_BC_TOL,
+    partition_of_unity: bool = _DEFAULTS["partition_of_unity"],
+    normalize: bool = True,
+    mass: str = "voronoi",
+    solver: str = _DEFAULTS["solver"],
+    tol: float = _DEFAULTS["tol"],
+    max_iter: int = _DEFAULTS["max_iter"],
+    seed: int = _DEFAULTS["seed"],
+    lbfgs_memory: int = _DEFAULTS["lbfgs_memory"],
+    verbose: bool = False,
+    callback: Callback | None = None,
+    return_info: bool = False,
+) -> NDArray[np.float64] | tuple[NDArray[np.float64], Info]:
+    """Exact bounded biharmonic weights for bones ``BE`` and point handles ``P``.
 
     The mesh must contain the handles and bone samples as vertices (see
-    ``skinrs.mesh_with_skeleton``); ``boundary_conditions`` finds them. Columns are ordered
-    as in libigl: point handles first, then bones. Every keyword of ``bbw_dual_constrained``
-    (``partition_of_unity``, ``solver``, ``tol``, ``verbose``, ``callback``, ...) applies.
+    ``skinrs.mesh_with_skeleton``); :func:`boundary_conditions` finds them (within ``bc_tol``
+    of the bounding-box diagonal). Columns are ordered as in libigl: point handles first, then
+    bones. The other keywords are those of :func:`bbw_dual_constrained`.
 
     Returns
     -------
@@ -269,10 +305,26 @@ def bbw_dual(V, T, C, BE=None, P=None, *, bc_tol=DEFAULT_BC_TOL, **options):
     >>> C, BE = skinrs.io.read_tgf("hand.tgf")                            # doctest: +SKIP
     >>> W = skinrs.bbw_dual(V, T, C, BE=BE)                               # doctest: +SKIP
     """
-    b, bc = boundary_conditions(V, C, P=P, BE=BE, tol=bc_tol)
-    return bbw_dual_constrained(V, T, b, bc, **options)
+    b, bc = boundary_conditions(V, C, BE=BE, P=P, tol=bc_tol)
+    return bbw_dual_constrained(
+        V,
+        T,
+        b,
+        bc,
+        partition_of_unity=partition_of_unity,
+        normalize=normalize,
+        mass=mass,
+        solver=solver,
+        tol=tol,
+        max_iter=max_iter,
+        seed=seed,
+        lbfgs_memory=lbfgs_memory,
+        verbose=verbose,
+        callback=callback,
+        return_info=return_info,
+    )
 
 
-def _describe(stage, iteration, value):
+def _describe(stage: str, iteration: int, value: float) -> str:
     what = "partition-of-unity residual" if stage.endswith("cg") else "relative gap"
     return f"{stage} iteration {iteration}: {what} {value:.2e}"

@@ -262,7 +262,7 @@ def _write_weights_output(args, mesh, W, C, BE, P):
         from .reduce import reduce_weights
 
         needs_mesh = args.reduce_method in ("smooth", "poisson")
-        packed = reduce_weights(W, min(args.influences, W.shape[1]), args.reduce_method,
+        packed = reduce_weights(W, min(args.influences, W.shape[1]), method=args.reduce_method,
                                 V=V, F=F if needs_mesh else None,
                                 bone_transforms=_example_poses(args.reduce_method, C, BE, P))  # fmt: skip
         write_weights(args.output, io_unpack(packed, W.shape[1]), packed)
@@ -306,7 +306,7 @@ def cmd_reduce(args) -> None:
     poses = _example_poses(args.method, C, BE, P) if C is not None else None
     prog = Progress(args.quiet, None, "sweep", lambda it, v: it)
     try:
-        I, A = reduce_weights(W, args.k, args.method, V=V, F=F, bone_transforms=poses,
+        I, A = reduce_weights(W, args.k, method=args.method, V=V, F=F, bone_transforms=poses,
                               callback=prog)  # fmt: skip
     finally:
         prog.close()

@@ -12,7 +12,7 @@ from . import bbw_dual, data
 from .plot import plot_weights
 
 
-def main(argv=None) -> int:
+def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--out", default="out/hand_weights.png", help="PNG to write")
     ap.add_argument("--tol", type=float, default=1e-6, help="relative duality gap to reach")

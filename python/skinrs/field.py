@@ -19,25 +19,32 @@ Each call builds its acceleration structure in Rust (in parallel, with the GIL r
 from __future__ import annotations
 
 import sys
+import time
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from . import _checks, _skinrs
+from ._checks import Callback
+from ._info import Info
 
 
-def _boundary(V, F):
+def _boundary(V: ArrayLike, F: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
     V = _checks.as_points(V, "V")
     d = V.shape[1]
     F = _checks.as_index_array(F, V.shape[0], "F", cols=d, allow_empty=False)
     return V, F
 
 
-def _queries(Q, d: int, name: str) -> np.ndarray:
+def _queries(Q: ArrayLike, d: int, name: str) -> NDArray[np.float64]:
     Q = _checks.as_points(Q, name, dims=(d,), min_rows=0)
     return Q
 
 
-def winding_number(V, F, Q, beta=None):
+def winding_number(
+    V: ArrayLike, F: ArrayLike, Q: ArrayLike, *, beta: float | None = None
+) -> NDArray[np.float64]:
     """Generalized winding number of a boundary at query points.
 
     Parameters
@@ -87,7 +94,7 @@ def winding_number(V, F, Q, beta=None):
     return _skinrs._winding_number(V, F, Q, beta)
 
 
-def segment_visible(V, F, P, Q):
+def segment_visible(V: ArrayLike, F: ArrayLike, P: ArrayLike, Q: ArrayLike) -> NDArray[np.bool_]:
     """Whether each segment ``P[i] -> Q[i]`` avoids the boundary (``V``, ``F``).
 
     The segment is open: touching the boundary at ``P[i]`` or ``Q[i]`` does not block it, and
@@ -121,7 +128,9 @@ def segment_visible(V, F, P, Q):
     return ~_skinrs._segment_hits(V, F, P, Q)
 
 
-def closest_point(V, F, Q):
+def closest_point(
+    V: ArrayLike, F: ArrayLike, Q: ArrayLike
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64], NDArray[np.float64]]:
     """Closest point of the boundary (``V``, ``F``) to each query point.
 
     Parameters
@@ -155,10 +164,10 @@ def closest_point(V, F, Q):
     return _skinrs._closest_point(V, F, Q)
 
 
-def knn_distance(X, k=9):
+def knn_distance(X: ArrayLike, *, k: int = 9) -> NDArray[np.float64]:
     """Distance from each point to its ``k``-th nearest other point (hash-grid search).
 
-    ``np.median(knn_distance(X, 9))`` is the kernel width ``sigma`` of Dodik et al. (Sec. 6.2).
+    ``np.median(knn_distance(X, k=9))`` is the kernel width ``sigma`` of Dodik et al. (Sec. 6.2).
     Coincident points count as neighbours at distance 0.
 
     Parameters
@@ -173,7 +182,7 @@ def knn_distance(X, k=9):
     Examples
     --------
     >>> import numpy as np, skinrs
-    >>> skinrs.knn_distance(np.array([[0.0, 0.0], [1.0, 0.0], [3.0, 0.0]]), 1)
+    >>> skinrs.knn_distance(np.array([[0.0, 0.0], [1.0, 0.0], [3.0, 0.0]]), k=1)
     array([1., 1., 2.])
     """
     X = _checks.as_points(X, "X")
@@ -185,31 +194,25 @@ def knn_distance(X, k=9):
 
 # --- the geometric field (Dodik et al. 2024, Secs. 4-5, App. A) ------------------------------
 
-#: Options of :class:`GeometricField` and their meaning (defaults: paper App. A).
-FIELD_OPTIONS = {
-    "n_points": "initial number of field points (2^11 in 2D, 2^13 in 3D)",
-    "samples": "Monte-Carlo samples per step M (2^12 in 2D, 2^11 in 3D)",
-    "steps": "steps of the full schedule (6000)",
-    "upsamples": "doublings of the point set at regular intervals (3)",
-    "lr": "initial Adam learning rate (0.2), divided by lr_decay (3) at each doubling",
-    "lr_decay": "learning-rate divisor at each doubling (3)",
-    "beta1": "Adam beta1 (0.9)",
-    "beta2": "Adam beta2 (0.8)",
-    "adam_eps": "Adam epsilon (1e-10)",
-    "h": "finite-difference step of eq. 13 in units of sigma (1)",
-    "eps": "radius of the handle / paint / Neumann neighbourhoods in units of sigma (0.5)",
-    "visibility": "visibility-aware kernel k_RT (True); False gives the plain Gaussian k_E",
-    "wn_l": "winding-number rejection threshold (0.1)",
-    "wn_h": "winding-number full-weight threshold (0.25)",
-    "pool": "interior samples drawn once; every step draws its M samples from them "
-    "(2^17 in 2D, 2^16 in 3D)",
-    "cache_visibility": "cache the visible points of each pool sample (True; exact)",
-    "skip_rays": "skip rays covered by boundary-free balls (True; exact, False to measure)",
-    "resume_steps": "steps of optimize() once the schedule is complete, e.g. after paint (1500)",
-}
+
+def default_options(dim: int) -> dict[str, Any]:
+    """The defaults of :class:`GeometricField`'s options in ``dim`` dimensions (paper App. A).
+
+    An option left at ``None`` takes this value. The values are defined in the Rust core.
+
+    Examples
+    --------
+    >>> import skinrs
+    >>> o = skinrs.field.default_options(3)
+    >>> o["n_points"], o["samples"], o["steps"], o["upsamples"], o["lr"], o["pool"]
+    (8192, 2048, 6000, 3, 0.2, 65536)
+    """
+    if dim not in (2, 3):
+        raise ValueError(f"dim must be 2 or 3, got {dim!r}")
+    return dict(_skinrs._field_defaults(dim))
 
 
-def _boundary_edges_2d(V, T):
+def _boundary_edges_2d(V: NDArray[np.float64], T: NDArray[np.int64]) -> NDArray[np.int64]:
     """Boundary segments of a 2D triangle mesh, oriented so the interior has winding number 1."""
     a, b, c = (V[T[:, i]] for i in range(3))
     u, v = b - a, c - a
@@ -221,7 +224,9 @@ def _boundary_edges_2d(V, T):
     return np.ascontiguousarray(E[cnt[inv.ravel()] == 1])
 
 
-def _handles(C, P, BE, d):
+def _handles(
+    C: ArrayLike, P: ArrayLike | None, BE: ArrayLike | None, d: int
+) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.int64]]:
     C = _checks.as_points(C, "C", min_rows=1)
     if d == 2 and C.shape[1] == 3:
         if np.any(C[:, 2] != 0):
@@ -275,9 +280,22 @@ class GeometricField:
         Seed of every random draw; results are bitwise reproducible for a seed.
     verbose : bool
         Print progress of :meth:`optimize` to stderr about every second.
-    **options
-        See :data:`FIELD_OPTIONS` (``n_points``, ``samples``, ``steps``, ``upsamples``, ``lr``,
-        ``h``, ``eps``, ``visibility``, ``pool``, ``resume_steps``, ...).
+    n_points, samples, steps, upsamples, lr, lr_decay, beta1, beta2, adam_eps, h, eps
+        and visibility, wn_l, wn_h, pool, cache_visibility, skip_rays: optional settings of
+        the optimisation; ``None`` takes :func:`default_options` for the dimension (paper
+        App. A). ``n_points``: initial number of field points; ``samples``: Monte-Carlo
+        samples per step M; ``steps``: steps of the full schedule; ``upsamples``: doublings of
+        the point set at regular intervals; ``lr``: initial Adam learning rate, divided by
+        ``lr_decay`` at each doubling; ``beta1``, ``beta2``, ``adam_eps``: Adam's constants;
+        ``h``: finite-difference step of eq. 13 in units of sigma; ``eps``: radius of the
+        handle / paint / Neumann neighbourhoods in units of sigma; ``visibility``: the
+        visibility-aware kernel k_RT (False: the plain Gaussian k_E); ``wn_l``, ``wn_h``:
+        winding-number rejection and full-weight thresholds; ``pool``: interior samples drawn
+        once, from which every step draws its M samples; ``cache_visibility``: cache the
+        visible points of each pool sample (exact); ``skip_rays``: skip rays covered by
+        boundary-free balls (exact; False only to measure).
+    resume_steps : int
+        Steps of :meth:`optimize` once the schedule is complete, e.g. after :meth:`paint`.
 
     Examples
     --------
@@ -295,18 +313,55 @@ class GeometricField:
 
     def __init__(
         self,
-        V,
-        F,
-        C,
-        BE=None,
-        P=None,
+        V: ArrayLike,
+        F: ArrayLike | None,
+        C: ArrayLike,
+        BE: ArrayLike | None = None,
+        P: ArrayLike | None = None,
         *,
-        tets=None,
-        neumann=False,
-        seed=0,
-        verbose=False,
-        **options,
-    ):
+        tets: ArrayLike | None = None,
+        neumann: bool = False,
+        seed: int = 0,
+        verbose: bool = False,
+        n_points: int | None = None,
+        samples: int | None = None,
+        steps: int | None = None,
+        upsamples: int | None = None,
+        lr: float | None = None,
+        lr_decay: float | None = None,
+        beta1: float | None = None,
+        beta2: float | None = None,
+        adam_eps: float | None = None,
+        h: float | None = None,
+        eps: float | None = None,
+        visibility: bool | None = None,
+        wn_l: float | None = None,
+        wn_h: float | None = None,
+        pool: int | None = None,
+        cache_visibility: bool | None = None,
+        skip_rays: bool | None = None,
+        resume_steps: int = 1500,
+    ) -> None:
+        given = {
+            "n_points": n_points,
+            "samples": samples,
+            "steps": steps,
+            "upsamples": upsamples,
+            "lr": lr,
+            "lr_decay": lr_decay,
+            "beta1": beta1,
+            "beta2": beta2,
+            "adam_eps": adam_eps,
+            "h": h,
+            "eps": eps,
+            "visibility": visibility,
+            "wn_l": wn_l,
+            "wn_h": wn_h,
+            "pool": pool,
+            "cache_visibility": cache_visibility,
+            "skip_rays": skip_rays,
+        }
+        options: dict[str, Any] = {k: v for k, v in given.items() if v is not None}
         V = _checks.as_points(V, "V")
         d = V.shape[1]
         n = V.shape[0]
@@ -336,10 +391,7 @@ class GeometricField:
                 raise ValueError("tets are for 3D shapes; in 2D pass the triangles as F")
             simplices = _checks.as_index_array(tets, n, "tets", cols=4, allow_empty=False)
         C, P, BE = _handles(C, P, BE, d)
-        unknown = set(options) - set(FIELD_OPTIONS)
-        if unknown:
-            raise ValueError(f"unknown options {sorted(unknown)}; see skinrs.field.FIELD_OPTIONS")
-        self._resume = _checks.positive_int(options.pop("resume_steps", 1500), "resume_steps")
+        self._resume = _checks.positive_int(resume_steps, "resume_steps")
         for key in ("n_points", "samples", "steps", "pool"):
             if key in options:
                 options[key] = _checks.positive_int(options[key], key)
@@ -365,7 +417,7 @@ class GeometricField:
         self.verbose = bool(verbose)
         self._f = _skinrs._GeometricField(V, Fb, simplices, C, P, BE, options)
 
-    def optimize(self, steps=None, callback=None):
+    def optimize(self, *, steps: int | None = None, callback: Callback | None = None) -> None:
         """Run Adam on the Monte-Carlo biharmonic energy.
 
         Parameters
@@ -393,7 +445,7 @@ class GeometricField:
                 file=sys.stderr,
             )
 
-    def paint(self, points, weights):
+    def paint(self, points: ArrayLike, weights: ArrayLike) -> None:
         """Add painted Dirichlet conditions (Sec. 4.3, Fig. 6); then :meth:`optimize` resumes.
 
         Parameters
@@ -415,7 +467,9 @@ class GeometricField:
             raise ValueError("painted weights must be >= 0 with rows summing to 1")
         self._f.paint(Q, np.ascontiguousarray(W))
 
-    def evaluate(self, Q, return_status=False):
+    def evaluate(
+        self, Q: ArrayLike, *, return_status: bool = False
+    ) -> NDArray[np.float64] | tuple[NDArray[np.float64], NDArray[np.uint8]]:
         """Weights at arbitrary points (eq. 7).
 
         Parameters
@@ -433,7 +487,9 @@ class GeometricField:
         W, s = self._f.evaluate(Q)
         return (W, s) if return_status else W
 
-    def vertex_weights(self, return_status=False):
+    def vertex_weights(
+        self, *, return_status: bool = False
+    ) -> NDArray[np.float64] | tuple[NDArray[np.float64], NDArray[np.uint8]]:
         """Weights at the input vertices ``V`` (App. A, "Evaluation on the boundary").
 
         Rays start 1e-5 (unit-box units) inside along the vertex normal; vertices outside the
@@ -448,32 +504,68 @@ class GeometricField:
         W, s = self._f.vertex_weights(self._V, self._normal_elems, self._adj)
         return (W, s) if return_status else W
 
-    def info(self):
-        """Diagnostics: points, sigma, step, learning rate, energy, rays, timings (dict)."""
-        return self._f.info()
+    def info(self) -> Info:
+        """Diagnostics: n_points, sigma, step, schedule_steps, lr, energy, rays, timings, and
+        ``converged`` (the schedule is complete) and ``seconds`` (time spent optimising)."""
+        i = Info(self._f.info())
+        i["converged"] = i["step"] >= i["schedule_steps"]
+        i["seconds"] = i["time_optimize"]
+        return i
 
     @property
-    def points(self):
+    def points(self) -> NDArray[np.float64]:
         """The field's points ``x_i`` (N, d), in the input's units."""
         return self._f.points()
 
     @property
-    def params(self):
+    def params(self) -> NDArray[np.float64]:
         """The parameters ``f_i`` (N, K)."""
         return self._f.params()
 
-    def energy(self, f, step=0):
+    def energy(self, f: ArrayLike, *, step: int = 0) -> tuple[float, NDArray[np.float64]]:
         """Monte-Carlo energy (eq. 11) and its hand-derived gradient at parameters ``f`` (N, K),
         with the samples of optimisation step ``step`` (for checks)."""
         f = _checks.as_points(f, "f", dims=(self.k,))
         return self._f.energy(f, int(step))
 
 
-def bbw_field(V, F, C, BE=None, P=None, **options):
+def bbw_field(
+    V: ArrayLike,
+    F: ArrayLike | None,
+    C: ArrayLike,
+    BE: ArrayLike | None = None,
+    P: ArrayLike | None = None,
+    *,
+    tets: ArrayLike | None = None,
+    neumann: bool = False,
+    seed: int = 0,
+    verbose: bool = False,
+    callback: Callback | None = None,
+    return_info: bool = False,
+    n_points: int | None = None,
+    samples: int | None = None,
+    steps: int | None = None,
+    upsamples: int | None = None,
+    lr: float | None = None,
+    lr_decay: float | None = None,
+    beta1: float | None = None,
+    beta2: float | None = None,
+    adam_eps: float | None = None,
+    h: float | None = None,
+    eps: float | None = None,
+    visibility: bool | None = None,
+    wn_l: float | None = None,
+    wn_h: float | None = None,
+    pool: int | None = None,
+    cache_visibility: bool | None = None,
+    skip_rays: bool | None = None,
+) -> NDArray[np.float64] | tuple[NDArray[np.float64], Info]:
     """Bounded biharmonic weights at the vertices of ``V`` without a volume mesh.
 
     One-shot :class:`GeometricField` (same arguments and options): optimise with the full
-    schedule, return :meth:`GeometricField.vertex_weights`.
+    schedule, return :meth:`GeometricField.vertex_weights`. ``callback`` is that of
+    :meth:`GeometricField.optimize`; ``return_info`` also returns
+    :meth:`GeometricField.info`.
 
     Examples
     --------
@@ -485,10 +577,43 @@ def bbw_field(V, F, C, BE=None, P=None, **options):
     >>> W.shape, bool(np.allclose(W.sum(1), 1))
     ((4, 2), True)
     """
-    fld = GeometricField(V, F, C, BE=BE, P=P, **options)
-    fld.optimize()
-    return fld.vertex_weights()
+    t0 = time.perf_counter()
+    fld = GeometricField(
+        V,
+        F,
+        C,
+        BE=BE,
+        P=P,
+        tets=tets,
+        neumann=neumann,
+        seed=seed,
+        verbose=verbose,
+        n_points=n_points,
+        samples=samples,
+        steps=steps,
+        upsamples=upsamples,
+        lr=lr,
+        lr_decay=lr_decay,
+        beta1=beta1,
+        beta2=beta2,
+        adam_eps=adam_eps,
+        h=h,
+        eps=eps,
+        visibility=visibility,
+        wn_l=wn_l,
+        wn_h=wn_h,
+        pool=pool,
+        cache_visibility=cache_visibility,
+        skip_rays=skip_rays,
+    )
+    fld.optimize(callback=callback)
+    W, _ = fld.vertex_weights(return_status=True)
+    if not return_info:
+        return W
+    info = fld.info()
+    info["seconds"] = time.perf_counter() - t0
+    return W, info
 
 
-def _describe(stage, iteration, value):
+def _describe(stage: str, iteration: int, value: float) -> str:
     return f"{stage} step {iteration}: energy {value:.4g}"

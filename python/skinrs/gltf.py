@@ -97,7 +97,7 @@ def _pack(W, k, method, V, F, C, BE, P, poses):
                 "random poses) or method='k-largest'"
             )
         poses = random_skeleton_poses(C, BE, 8, seed=0)
-    return reduce_weights(W, k, method, V=V, F=F, bone_transforms=poses)
+    return reduce_weights(W, k, method=method, V=V, F=F, bone_transforms=poses)
 
 
 def _joint_weights(I, A, column_joint, n_joints):

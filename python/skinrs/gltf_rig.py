@@ -57,7 +57,7 @@ def skeleton_rig(C, BE, P, names):
     ``labels`` the index in ``C`` of each node's position (kept in the file as node extras).
     """
     nP, m = len(P), len(BE)
-    par = bone_parents(BE, len(C)) if m else np.zeros(0, dtype=np.int64)
+    par = bone_parents(BE, n_joints=len(C)) if m else np.zeros(0, dtype=np.int64)
     parents = [-1] * nP + [int(p) + nP if p >= 0 else -1 for p in par]
     bind = [np.eye(4) for _ in range(nP + m)]
     for i, p in enumerate(P):

@@ -12,11 +12,16 @@ for surfaces TetGen rejects, ``pytetwild``: ``pip install skinrs[mesh]``.
 from __future__ import annotations
 
 import itertools
+import time
 import warnings
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
-from ._checks import as_index_array, as_points
+from . import _skinrs
+from ._checks import Callback, as_index_array, as_points
 from ._external_meshers import _INSTALL, _self_intersects, _tetgen, _tetwild, _triangle
 from ._skeleton_sampling import _bc_matrix, _mean_edge_length, sample_skeleton
 from ._tet_edit import (  # noqa: F401 - tests reach the last two as meshing._*
@@ -26,49 +31,35 @@ from ._tet_edit import (  # noqa: F401 - tests reach the last two as meshing._*
     _snap,
     _tet_volumes,
 )
+from .field import winding_number as _fast_winding_number
 
 __all__ = [
     "MeshingWarning",
     "mesh_with_skeleton",
     "sample_skeleton",
     "skin_weights",
-    "winding_number",
 ]
+
+
+_BBW_DEFAULTS: dict[str, Any] = _skinrs.BBW_DEFAULTS
+
+Arr = NDArray[Any]
+#: Per sample, the handle columns it belongs to.
+Handles = list[list[int]]
 
 
 class MeshingWarning(UserWarning):
     """Something in the meshing needed a compromise (bone partly outside, snapped samples)."""
 
 
-# ---------------------------------------------------------------------------------------------
-# Generalised winding numbers (Jacobson et al. 2013), exact, in numpy
+def _winding_number(V: Arr, F: Arr, Q: Arr) -> Arr:
+    """Exact generalised winding numbers (the hierarchical sum with no far-field expansion)."""
+    return _fast_winding_number(V, F, Q, beta=np.inf)
 
 
-def winding_number(V, F, Q, chunk: int = 256) -> np.ndarray:
-    """Winding number of closed (or nearly closed) boundary ``(V, F)`` at the points ``Q``.
-
-    3D: ``F (k, 3)`` triangles, sum of signed solid angles / 4 pi (Van Oosterom & Strackee).
-    2D: ``F (k, 2)`` oriented edges, sum of signed angles / 2 pi. About 1 inside a
-    counter-clockwise (2D) or outward-oriented (3D) boundary, 0 outside.
-    """
-    V, Q = np.asarray(V, float), np.asarray(Q, float)
-    out = np.empty(len(Q))
-    for s in range(0, len(Q), chunk):
-        q = Q[s : s + chunk, None, :]
-        if F.shape[1] == 2:
-            a, b = V[F[:, 0]][None] - q, V[F[:, 1]][None] - q
-            cr = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
-            out[s : s + chunk] = np.arctan2(cr, (a * b).sum(-1)).sum(1) / (2 * np.pi)
-        else:
-            a, b, c = (V[F[:, i]][None] - q for i in range(3))
-            la, lb, lc = (np.linalg.norm(x, axis=-1) for x in (a, b, c))
-            det = np.einsum("qki,qki->qk", a, np.cross(b, c))
-            den = la * lb * lc + (a * b).sum(-1) * lc + (b * c).sum(-1) * la + (c * a).sum(-1) * lb
-            out[s : s + chunk] = 2 * np.arctan2(det, den).sum(1) / (4 * np.pi)
-    return out
-
-
-def _keep_inside(S, handles, inside, n_points: int, n_bones: int):
+def _keep_inside(
+    S: Arr, handles: Handles, inside: Arr, n_points: int, n_bones: int
+) -> tuple[Arr, Handles]:
     """Drops outside samples; warns for a partly outside bone, raises for a wholly outside one."""
     for k in range(n_points):
         rows = [r for r, hs in enumerate(handles) if k in hs]
@@ -76,12 +67,12 @@ def _keep_inside(S, handles, inside, n_points: int, n_bones: int):
             raise ValueError(f"point handle {k} lies outside the surface")
     for e in range(n_bones):
         c = n_points + e
-        rows = np.array([r for r, hs in enumerate(handles) if c in hs])
-        frac_out = 1.0 - inside[rows].mean()
+        bone_rows = np.array([r for r, hs in enumerate(handles) if c in hs])
+        frac_out = 1.0 - inside[bone_rows].mean()
         if frac_out == 1.0:
             raise ValueError(
                 f"bone {e} lies wholly outside the surface: none of its "
-                f"{len(rows)} samples is inside; fix the skeleton or the mesh"
+                f"{len(bone_rows)} samples is inside; fix the skeleton or the mesh"
             )
         if frac_out > 0:
             warnings.warn(
@@ -94,7 +85,7 @@ def _keep_inside(S, handles, inside, n_points: int, n_bones: int):
     return S[keep], [handles[r] for r in keep]
 
 
-def _as_2d(V, F):
+def _as_2d(V: Arr, F: Arr | None) -> tuple[Arr, Arr]:
     """2D input: ``V (n, 2)`` (or ``(n, 3)`` with z = 0) with triangles, edges or nothing."""
     V2 = V[:, :2]
     if F is None:
@@ -110,18 +101,18 @@ def _as_2d(V, F):
 
 
 def mesh_with_skeleton(
-    V,
-    F,
-    C,
-    BE=None,
-    P=None,
+    V: ArrayLike,
+    F: ArrayLike | None,
+    C: ArrayLike,
+    BE: ArrayLike | None = None,
+    P: ArrayLike | None = None,
     *,
     samples_per_edge: float = 2.0,
     min_samples: int = 2,
     flags: str | None = None,
-    tetwild_options: dict | None = None,
+    tetwild_options: dict[str, Any] | None = None,
     verbose: bool = False,
-):
+) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
     """Volume mesh of a closed surface (3D) or a 2D domain whose vertices include the handles.
 
     Bones are sampled about ``samples_per_edge`` times per average edge length of the input
@@ -196,15 +187,14 @@ def mesh_with_skeleton(
     nP = 0 if P is None else len(P)
     nB = 0 if BE is None else len(BE)
     if planar:
-        Vd, E = _as_2d(V, F)
-        rho = _mean_edge_length(Vd, F if F is not None and F.shape[1] == 3 else E)
-        boundary = E
+        Vd, boundary = _as_2d(V, F)  # the outline's edges
+        rho = _mean_edge_length(Vd, F if F is not None and F.shape[1] == 3 else boundary)
     else:
-        Vd, E = V, None
+        assert F is not None  # _checked_domain asks a 3D surface for its triangles
+        Vd, boundary = V, F
         rho = _mean_edge_length(V, F)
-        boundary = F
     S, handles = sample_skeleton(C, BE, P, spacing=rho / samples_per_edge, min_samples=min_samples)
-    inside = np.abs(winding_number(Vd, boundary, S)) > 0.5
+    inside = np.abs(_winding_number(Vd, boundary, S)) > 0.5
     S, handles = _keep_inside(S, handles, inside, nP, nB)
 
     # a sample sitting on an input vertex is that vertex (inserting it again would be dropped
@@ -218,12 +208,13 @@ def mesh_with_skeleton(
     Si = S[insert]
 
     if planar:
-        Vv, T = _mesh_planar(Vd, F, E, S, handles, insert, nP, nB, flags, verbose)
+        Vv, T = _mesh_planar(Vd, F, boundary, S, handles, insert, nP, nB, flags, verbose)
     else:
-        Vv, T, err = _tetgen_keeping_rows(V, F, Si, flags or "pq2Y", verbose)
-        if Vv is None:
+        Vt, Tt, err = _tetgen_keeping_rows(V, boundary, Si, flags or "pq2Y", verbose)
+        if Vt is None or Tt is None:
             fallback = _TetWildFallback(rho, samples_per_edge, tetwild_options, flags, verbose)
-            return fallback.mesh(V, F, S, Si, handles, nP + nB, scale, err)
+            return fallback.mesh(V, boundary, S, Si, handles, nP + nB, scale, err)
+        Vv, T = Vt, Tt
 
     b = np.where(on_vertex, nearest, 0)
     b[insert] = len(V) + np.arange(len(insert))
@@ -234,7 +225,9 @@ def mesh_with_skeleton(
     return Vv, T, b[order].astype(np.int64), bc[order]
 
 
-def _checked_domain(V, F, C, BE, P):
+def _checked_domain(
+    V: ArrayLike, F: ArrayLike | None, C: ArrayLike, BE: ArrayLike | None, P: ArrayLike | None
+) -> tuple[Arr, Arr | None, Arr, Arr | None, Arr | None, bool]:
     """The arguments of :func:`mesh_with_skeleton` as checked arrays, and whether it is 2D."""
     V = as_points(V, "V", dims=(2, 3))
     n = len(V)
@@ -260,7 +253,18 @@ def _checked_domain(V, F, C, BE, P):
     return V, F, C, BE, P, planar
 
 
-def _mesh_planar(Vd, F, E, S, handles, insert, nP, nB, flags, verbose):
+def _mesh_planar(
+    Vd: Arr,
+    F: Arr | None,
+    E: Arr,
+    S: Arr,
+    handles: Handles,
+    insert: Arr,
+    nP: int,
+    nB: int,
+    flags: str | None,
+    verbose: bool,
+) -> tuple[Arr, Arr]:
     """Triangle mesh of the 2D domain with the inserted samples as vertices, bones as segments."""
     Si = S[insert]
     seg = _bone_segments(S, handles, insert, nP, nB)
@@ -272,10 +276,12 @@ def _mesh_planar(Vd, F, E, S, handles, insert, nP, nB, flags, verbose):
         raise RuntimeError("Triangle did not keep the input vertices and samples in order")
     # Triangle keeps triangles inside the outer segments only: drop those in holes
     cent = Vv[T].mean(axis=1)
-    return Vv, T[np.abs(winding_number(Vd, E, cent)) > 0.5]
+    return Vv, T[np.abs(_winding_number(Vd, E, cent)) > 0.5]
 
 
-def _tetgen_keeping_rows(V, F, Si, flags: str, verbose: bool):
+def _tetgen_keeping_rows(
+    V: Arr, F: Arr, Si: Arr, flags: str, verbose: bool
+) -> tuple[Arr | None, Arr | None, Exception | None]:
     """TetGen's ``(V_vol, T, None)`` when it keeps the surface vertices and the samples as the
     first rows, else ``(None, None, the error TetGen raised or None)``."""
     try:
@@ -291,12 +297,12 @@ def _tetgen_keeping_rows(V, F, Si, flags: str, verbose: bool):
     return Vv, T, None
 
 
-def _rows_match(Vv, V, S) -> bool:
+def _rows_match(Vv: Arr, V: Arr, S: Arr) -> bool:
     n, s = len(V), len(S)
     return len(Vv) >= n + s and np.array_equal(Vv[:n], V) and np.array_equal(Vv[n : n + s], S)
 
 
-def _bone_segments(S, handles, insert, nP, nB):
+def _bone_segments(S: Arr, handles: Handles, insert: Arr, nP: int, nB: int) -> Arr:
     """Segments between consecutive inserted samples of each bone (for Triangle)."""
     pos = {int(r): k for k, r in enumerate(insert)}
     segs = []
@@ -317,7 +323,14 @@ class _TetWildFallback:
     """The 3D mesh when TetGen rejects the surface: fTetWild, then TetGen on fTetWild's repaired
     boundary, then snapping (see :func:`mesh_with_skeleton`)."""
 
-    def __init__(self, rho, samples_per_edge, tetwild_options, flags, verbose):
+    def __init__(
+        self,
+        rho: float,
+        samples_per_edge: float,
+        tetwild_options: dict[str, Any] | None,
+        flags: str | None,
+        verbose: bool,
+    ) -> None:
         user = dict(tetwild_options or {})
         self.options = {"edge_length_abs": rho, **user}
         # for snapping, vertices must be at least as dense as the samples
@@ -326,7 +339,17 @@ class _TetWildFallback:
         self.flags = flags or "pq2Y"
         self.verbose = verbose
 
-    def mesh(self, V, F, S, Si, handles, m, scale, err):
+    def mesh(
+        self,
+        V: Arr,
+        F: Arr,
+        S: Arr,
+        Si: Arr,
+        handles: Handles,
+        m: int,
+        scale: float,
+        err: Exception | None,
+    ) -> tuple[Arr, Arr, Arr, Arr]:
         """``(V_vol, T, b, bc)`` for the samples ``S`` (``Si``: those not on a surface vertex)."""
         try:
             Vw, Tw = _tetwild(V, F, Si, self.verbose, **self.options)
@@ -337,13 +360,23 @@ class _TetWildFallback:
                 f"{_INSTALL} (or repair the surface)"
             ) from None
 
-        def finer():
+        def finer() -> tuple[Arr, Arr]:
             return _tetwild(V, F, Si, self.verbose, **self.fine_options)
 
         return _fallback(Vw, Tw, S, handles, m, scale, self.flags, self.verbose, finer)
 
 
-def _fallback(Vw, Tw, S, handles, m, scale, flags, verbose, finer):
+def _fallback(
+    Vw: Arr,
+    Tw: Arr,
+    S: Arr,
+    handles: Handles,
+    m: int,
+    scale: float,
+    flags: str,
+    verbose: bool,
+    finer: Callable[[], tuple[Arr, Arr]],
+) -> tuple[Arr, Arr, Arr, Arr]:
     """After fTetWild: mesh its clean boundary again with TetGen and the samples inserted; if
     that fails too, mesh again with fTetWild at the sample spacing (``finer()``) and move the
     nearest interior vertices onto the samples."""
@@ -384,7 +417,27 @@ def _fallback(Vw, Tw, S, handles, m, scale, flags, verbose, finer):
 # ---------------------------------------------------------------------------------------------
 
 
-def skin_weights(V, F, C, BE=None, P=None, *, mesh_options=None, return_mesh=False, **bbw_options):
+def skin_weights(
+    V: ArrayLike,
+    F: ArrayLike | None,
+    C: ArrayLike,
+    BE: ArrayLike | None = None,
+    P: ArrayLike | None = None,
+    *,
+    mesh_options: dict[str, Any] | None = None,
+    partition_of_unity: bool = _BBW_DEFAULTS["partition_of_unity"],
+    normalize: bool = True,
+    mass: str = "voronoi",
+    solver: str = _BBW_DEFAULTS["solver"],
+    tol: float = _BBW_DEFAULTS["tol"],
+    max_iter: int = _BBW_DEFAULTS["max_iter"],
+    seed: int = _BBW_DEFAULTS["seed"],
+    lbfgs_memory: int = _BBW_DEFAULTS["lbfgs_memory"],
+    verbose: bool = False,
+    callback: Callback | None = None,
+    return_mesh: bool = False,
+    return_info: bool = False,
+) -> Any:
     """Bounded biharmonic weights on the vertices of a surface (3D) or 2D domain.
 
     Meshes the interior with the handles as vertices (:func:`mesh_with_skeleton`), solves
@@ -396,17 +449,23 @@ def skin_weights(V, F, C, BE=None, P=None, *, mesh_options=None, return_mesh=Fal
         As in :func:`mesh_with_skeleton`.
     mesh_options : dict, optional
         Extra keyword arguments of :func:`mesh_with_skeleton`.
+    partition_of_unity, normalize, mass, solver, tol, max_iter, seed, lbfgs_memory, verbose
+        and callback as in :func:`skinrs.bbw_dual_constrained`.
     return_mesh : bool
         Also return a dict with the volume mesh and its weights: ``V``, ``T``, ``b``, ``bc``,
         ``W`` (all volume vertices).
-    **bbw_options
-        Passed to :func:`skinrs.bbw_dual_constrained` (``tol``, ``max_iter``, ...).
+    return_info : bool
+        Also return an :class:`skinrs.Info`: that of :func:`skinrs.bbw_dual_constrained` plus
+        ``volume_vertices``, ``volume_elements``, ``time_meshing`` and ``interpolated`` (the
+        fallback mesher moved the surface, so the weights were interpolated), and ``seconds``
+        for the whole call.
 
     Returns
     -------
     W : (n, p + k) float array
         Weights of the input vertices: point handles first, then bones; ``W >= 0``, rows sum to
-        1, and 1 in a bone's column on that bone.
+        1, and 1 in a bone's column on that bone. Followed by the mesh dict and the info, when
+        asked for, in that order.
 
     Examples
     --------
@@ -419,33 +478,53 @@ def skin_weights(V, F, C, BE=None, P=None, *, mesh_options=None, return_mesh=Fal
     """
     from .bbw import bbw_dual_constrained
 
-    n = len(np.asarray(V))
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        Vv, T, b, bc = mesh_with_skeleton(V, F, C, BE, P, **(mesh_options or {}))
-    snapped = False
-    for w in caught:
-        snapped |= issubclass(w.category, MeshingWarning) and "fTetWild" in str(w.message)
-        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-    W = bbw_dual_constrained(Vv, T, b, bc, **bbw_options)
-    if isinstance(W, tuple):  # return_info=True
-        W = W[0]
-    if not snapped:
-        Ws = np.ascontiguousarray(W[:n])
-    else:
-        Ws = _interpolate(np.asarray(V, float), Vv, T, W)
+    t0 = time.perf_counter()
+    Vin = np.asarray(V, dtype=np.float64)
+    Vv, T, b, bc = mesh_with_skeleton(V, F, C, BE, P, **(mesh_options or {}))
+    t_mesh = time.perf_counter() - t0
+    W, info = bbw_dual_constrained(
+        Vv,
+        T,
+        b,
+        bc,
+        partition_of_unity=partition_of_unity,
+        normalize=normalize,
+        mass=mass,
+        solver=solver,
+        tol=tol,
+        max_iter=max_iter,
+        seed=seed,
+        lbfgs_memory=lbfgs_memory,
+        verbose=verbose,
+        callback=callback,
+        return_info=True,
+    )
+    n = len(Vin)
+    # The meshers keep the input vertices as the first rows; only the fallback does not.
+    kept = Vv.shape[1] == Vin.shape[1] and np.array_equal(Vv[:n], Vin)
+    Ws = np.ascontiguousarray(W[:n]) if kept else _interpolate(Vin, Vv, T, W)
+    out: list[Any] = [Ws]
     if return_mesh:
-        return Ws, {"V": Vv, "T": T, "b": b, "bc": bc, "W": W}
-    return Ws
+        out.append({"V": Vv, "T": T, "b": b, "bc": bc, "W": W})
+    if return_info:
+        info.update(
+            volume_vertices=len(Vv),
+            volume_elements=len(T),
+            time_meshing=t_mesh,
+            interpolated=not kept,
+            seconds=time.perf_counter() - t0,
+        )
+        out.append(info)
+    return out[0] if len(out) == 1 else tuple(out)
 
 
-def _interpolate(Q, Vv, T, W):
+def _interpolate(Q: Arr, Vv: Arr, T: Arr, W: Arr) -> Arr:
     """Weights at points ``Q`` by barycentric interpolation in the best tet around the nearest
     vertex (for the fallback mesh, whose surface only approximates the input)."""
     from scipy.spatial import cKDTree
 
     _, near = cKDTree(Vv).query(Q)
-    inc = [[] for _ in range(len(Vv))]
+    inc: list[list[int]] = [[] for _ in range(len(Vv))]
     for t, row in enumerate(T):
         for v in row:
             inc[v].append(t)

@@ -10,30 +10,34 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
+from numpy.typing import ArrayLike, NDArray
 
 from . import _checks, _skinrs
 
-_MASS_KINDS = ("voronoi", "barycentric")
+#: The lumped mass kinds (from the Rust core).
+MASS_KINDS: tuple[str, ...] = _skinrs.MASS_KINDS
 
 
-def _mesh(V, F):
+def _mesh(V: ArrayLike, F: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
     V = _checks.as_points(V, "V")
     F = _checks.as_elements(F, V, "F")
     return V, F
 
 
-def _mass_kind(kind, name):
-    if not isinstance(kind, str) or kind.lower() not in _MASS_KINDS:
-        raise ValueError(f"{name} must be 'voronoi' or 'barycentric', got {kind!r}")
+def _mass_kind(kind: object, name: str) -> str:
+    if not isinstance(kind, str) or kind.lower() not in MASS_KINDS:
+        raise ValueError(f"{name} must be one of {MASS_KINDS}, got {kind!r}")
     return kind.lower()
 
 
-def _csc(parts):
+def _csc(
+    parts: tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.int64], tuple[int, int]],
+) -> sp.csc_matrix:
     data, indices, indptr, shape = parts
     return sp.csc_matrix((data, indices, indptr), shape=shape)
 
 
-def cotan_laplacian(V, F):
+def cotan_laplacian(V: ArrayLike, F: ArrayLike) -> sp.csc_matrix:
     """Cotangent Laplacian of a triangle mesh (2D or 3D) or a tetrahedral mesh.
 
     Same convention as ``igl.cotmatrix``: ``L`` is symmetric and **negative** semidefinite, with
@@ -74,7 +78,7 @@ def cotan_laplacian(V, F):
     return _csc(_skinrs._cotan_laplacian(V, F))
 
 
-def massmatrix(V, F, kind="voronoi"):
+def massmatrix(V: ArrayLike, F: ArrayLike, *, kind: str = "voronoi") -> sp.csc_matrix:
     """Lumped (diagonal) mass matrix, equal to ``igl.massmatrix``.
 
     Parameters
@@ -109,7 +113,7 @@ def massmatrix(V, F, kind="voronoi"):
     return sp.csc_matrix((m, idx[:n], idx), shape=(n, n))
 
 
-def biharmonic_matrix(V, F, mass="voronoi"):
+def biharmonic_matrix(V: ArrayLike, F: ArrayLike, *, mass: str = "voronoi") -> sp.csc_matrix:
     """Biharmonic energy matrix ``B = L^T M^-1 L``.
 
     ``L`` is :func:`cotan_laplacian` and ``M`` the lumped mass matrix of kind ``mass``, divided by
@@ -140,7 +144,7 @@ def biharmonic_matrix(V, F, mass="voronoi"):
     return _csc(_skinrs._biharmonic_matrix(V, F, mass))
 
 
-def connected_components(F, n=None):
+def connected_components(F: ArrayLike, *, n: int | None = None) -> tuple[int, NDArray[np.int64]]:
     """Connected components of the vertices of a mesh (vertices sharing an element are connected).
 
     Parameters

@@ -2,10 +2,15 @@
 
 from __future__ import annotations
 
+import os
+from collections.abc import Iterable
+from typing import Any
+
 import numpy as np
+from numpy.typing import ArrayLike
 
 
-def _plt():
+def _plt() -> Any:
     try:
         import matplotlib
 
@@ -16,7 +21,18 @@ def _plt():
     return plt
 
 
-def plot_weights(V, F, W, columns=None, C=None, BE=None, path=None, title=None, view=(0, 1)):
+def plot_weights(
+    V: ArrayLike,
+    F: ArrayLike,
+    W: ArrayLike,
+    *,
+    columns: Iterable[int] | None = None,
+    C: ArrayLike | None = None,
+    BE: ArrayLike | None = None,
+    path: str | os.PathLike[str] | None = None,
+    title: str | None = None,
+    view: tuple[int, int] = (0, 1),
+) -> Any:
     """Colour maps of weight functions on a triangle mesh (a surface is shown projected).
 
     Parameters
@@ -33,15 +49,17 @@ def plot_weights(V, F, W, columns=None, C=None, BE=None, path=None, title=None, 
     W = np.asarray(W, dtype=float)
     m = W.shape[1]
     if columns is None:
-        columns = np.unique(np.linspace(0, m - 1, min(4, m)).round().astype(int))
-    fig, axes = plt.subplots(1, len(columns), figsize=(4 * len(columns), 4.4), squeeze=False)
+        shown = np.unique(np.linspace(0, m - 1, min(4, m)).round().astype(int)).tolist()
+    else:
+        shown = list(columns)
+    fig, axes = plt.subplots(1, len(shown), figsize=(4 * len(shown), 4.4), squeeze=False)
     x, y = V[:, view[0]], V[:, view[1]]
     # Paint far faces first so the visible side ends on top.
     depth_axis = ({0, 1, 2} - set(view)).pop() if V.shape[1] == 3 else None
     F = np.asarray(F)
     if depth_axis is not None:
         F = F[np.argsort(V[F, depth_axis].mean(1))]
-    for ax, j in zip(axes[0], columns):
+    for ax, j in zip(axes[0], shown, strict=True):
         tc = ax.tripcolor(x, y, F, W[:, j], shading="gouraud", cmap="viridis", vmin=0, vmax=1)
         if C is not None and BE is not None:
             C = np.asarray(C, dtype=float)

@@ -22,20 +22,24 @@ skinning). Results come in packed fixed-k form ``(indices (n, k), weights (n, k)
 >>> W = np.array([[.7, .2, .1], [.2, .7, .1], [.1, .2, .7], [.4, .3, .3]])
 >>> Cj = [[0, 0, 0], [0, 1, 0], [0, 2, 0], [0, 3, 0]]      # joints of a 3-bone chain
 >>> P = skinrs.random_skeleton_poses(Cj, [[0, 1], [1, 2], [2, 3]], 3, seed=0)
->>> I, A = skinrs.reduce_weights(W, 2, "poisson", V=V, F=F, bone_transforms=P)
+>>> I, A = skinrs.reduce_weights(W, 2, method="poisson", V=V, F=F, bone_transforms=P)
 >>> I.shape, bool(np.allclose(A.sum(1), 1))
 ((4, 2), True)
 """
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
+from numpy.typing import ArrayLike, NDArray
 
 from . import _skinrs
 from ._checks import (
+    Callback,
     as_elements,
     as_index_array,
     as_points,
@@ -43,48 +47,30 @@ from ._checks import (
     positive_float,
     positive_int,
 )
-from .skinning import forward_kinematics as _fk
-from .skinning import per_vertex_normals
+from ._info import Info
+from .skinning import forward_kinematics
 
-METHODS = ("k-largest", "smooth", "geometric", "poisson")
-ENERGIES = ("gradient", "laplacian")
-SOLVERS = ("auto", "local", "cg")
+#: Choice lists and defaults of :func:`reduce_weights` (from the Rust core).
+METHODS: tuple[str, ...] = _skinrs.REDUCE_METHODS
+ENERGIES: tuple[str, ...] = _skinrs.REDUCE_ENERGIES
+SOLVERS: tuple[str, ...] = _skinrs.REDUCE_SOLVERS
+_DEFAULTS: dict[str, Any] = _skinrs.REDUCE_DEFAULTS
+
+#: Packed weights ``(indices (n, k) int, weights (n, k) float)``.
+Packed = tuple[NDArray[np.int64], NDArray[np.float64]]
 
 __all__ = [
+    "ENERGIES",
     "METHODS",
+    "SOLVERS",
     "ReductionError",
-    "ReductionInfo",
     "deform",
-    "forward_kinematics",
     "random_skeleton_poses",
     "reduce_weights",
     "reduction_error",
     "transform_normals",
     "unpack_weights",
-    "vertex_normals",
 ]
-
-
-@dataclass
-class ReductionInfo:
-    """How a reduction went.
-
-    objective : (s+1,) global objective before the first sweep and after each sweep or
-        conjugate-gradient iteration (empty for k-largest); never increases.
-    sweeps : number of sweeps (or iterations) run.
-    converged : whether the stopping rule (see ``tol``) was met before ``max_sweeps``.
-    colours : number of colour classes (parallel batches of one sweep); 0 when conjugate
-        gradients ran.
-    qp_capped : local QPs that hit their active-set iteration cap (normally 0).
-    nonnegative : the non-negativity setting used.
-    """
-
-    objective: np.ndarray
-    sweeps: int
-    converged: bool
-    colours: int
-    qp_capped: int
-    nonnegative: bool
 
 
 @dataclass
@@ -105,7 +91,7 @@ class ReductionError:
     position_rms_all: float
 
 
-def _float_array(X, name: str, ndim: int) -> np.ndarray:
+def _float_array(X: ArrayLike, name: str, ndim: int) -> NDArray[np.float64]:
     try:
         A = np.asarray(X, dtype=np.float64)
     except (TypeError, ValueError) as e:
@@ -117,7 +103,14 @@ def _float_array(X, name: str, ndim: int) -> np.ndarray:
     return np.ascontiguousarray(A)
 
 
-def _poses(control_points, bone_transforms, m: int, d: int | None, *, required: bool):
+def _poses(
+    control_points: ArrayLike | None,
+    bone_transforms: ArrayLike | None,
+    m: int,
+    d: int | None,
+    *,
+    required: bool,
+) -> tuple[NDArray[np.float64] | None, NDArray[np.float64] | None, bool]:
     """Checks the example poses; a single pose may be given without the leading axis.
 
     Returns ``(control_points, bone_transforms, single)``, batched, one of them ``None``.
@@ -139,6 +132,7 @@ def _poses(control_points, bone_transforms, m: int, d: int | None, *, required: 
                 f"got {np.shape(control_points)}"
             )
         return P, None, single
+    assert bone_transforms is not None
     T = np.asarray(bone_transforms)
     single = T.ndim == 3
     T = _float_array(T[None] if single else T, "bone_transforms", 4)
@@ -151,7 +145,9 @@ def _poses(control_points, bone_transforms, m: int, d: int | None, *, required: 
     return None, T, single
 
 
-def _packed(reduced, n: int | None = None):
+def _packed(
+    reduced: Packed | ArrayLike, n: int | None = None
+) -> tuple[NDArray[np.int64], NDArray[np.float64], int]:
     """``(indices, weights)`` or a dense ``(n, m)`` matrix -> int64 indices, float weights, m."""
     if isinstance(reduced, tuple) and len(reduced) == 2:
         Wr = as_points(reduced[1], "weights", dims=range(1, 1 << 30))
@@ -171,24 +167,24 @@ def _packed(reduced, n: int | None = None):
 
 
 def reduce_weights(
-    W,
-    k,
-    method="poisson",
+    W: ArrayLike,
+    k: int,
     *,
-    V=None,
-    F=None,
-    control_points=None,
-    bone_transforms=None,
-    C=None,
-    nonnegative=None,
-    max_sweeps=1000,
-    tol=1e-4,
-    relaxation=1.9,
-    energy="gradient",
-    solver="auto",
-    return_info=False,
-    callback=None,
-):
+    method: str = "poisson",
+    V: ArrayLike | None = None,
+    F: ArrayLike | None = None,
+    control_points: ArrayLike | None = None,
+    bone_transforms: ArrayLike | None = None,
+    C: ArrayLike | None = None,
+    nonnegative: bool | None = None,
+    max_sweeps: int = _DEFAULTS["max_sweeps"],
+    tol: float = _DEFAULTS["tol"],
+    relaxation: float = _DEFAULTS["relaxation"],
+    energy: str = _DEFAULTS["energy"],
+    solver: str = _DEFAULTS["solver"],
+    return_info: bool = False,
+    callback: Callback | None = None,
+) -> Packed | tuple[NDArray[np.int64], NDArray[np.float64], Info]:
     """Reduce skinning weights to ``k`` influences per vertex (paper 002).
 
     Parameters
@@ -241,7 +237,13 @@ def reduce_weights(
         only; ``"auto"`` (default): ``"cg"`` without bounds, ``"local"`` with them. Both report the
         objective after every sweep / iteration and reach the same minimiser.
     return_info : bool
-        Also return a :class:`ReductionInfo` (objective per sweep, ...).
+        Also return an :class:`skinrs.Info` with ``objective`` ((s+1,) global objective before
+        the first sweep and after each sweep or conjugate-gradient iteration, empty for
+        k-largest; never increases), ``sweeps`` (sweeps or iterations run), ``converged``
+        (the stopping rule was met before ``max_sweeps``), ``colours`` (colour classes, the
+        parallel batches of one sweep; 0 when conjugate gradients ran), ``qp_capped`` (local
+        QPs that hit their active-set iteration cap, normally 0), ``nonnegative`` (the setting
+        used) and ``seconds``.
     callback : callable(stage, iteration, value) -> bool | None, optional
         Called about every 0.1 s with the sweep and objective; returning False stops.
 
@@ -251,16 +253,17 @@ def reduce_weights(
         Kept handles per vertex, in decreasing order of the original weight.
     weights : (n, k) float
         Their weights; rows sum to 1.
-    info : ReductionInfo, only with ``return_info=True``.
+    info : Info, only with ``return_info=True``.
 
     Examples
     --------
     >>> import numpy as np, skinrs
     >>> W = np.array([[.6, .3, .1], [.1, .5, .4]])
-    >>> I, A = skinrs.reduce_weights(W, 2, "k-largest")
+    >>> I, A = skinrs.reduce_weights(W, 2, method="k-largest")
     >>> I.tolist(), np.round(A, 3).tolist()
     ([[0, 1], [1, 2]], [[0.667, 0.333], [0.556, 0.444]])
     """
+    t0 = time.perf_counter()
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     W = as_weights(W)
@@ -299,34 +302,37 @@ def reduce_weights(
         W,
         k,
         method,
-        V,
-        F,
-        P,
-        T,
-        C,
-        bool(nonnegative),
-        max_sweeps,
-        tol,
-        relaxation,
-        energy,
-        solver,
-        callback,
+        v=V,
+        f=F,
+        control_points=P,
+        bone_transforms=T,
+        c=C,
+        nonnegative=bool(nonnegative),
+        max_sweeps=max_sweeps,
+        tol=tol,
+        relaxation=relaxation,
+        energy=energy,
+        solver=solver,
+        callback=callback,
     )
     if not return_info:
         return I, A
-    obj = np.asarray(obj)
-    info = ReductionInfo(
-        objective=obj,
-        sweeps=max(len(obj) - 1, 0),
+    objective = np.asarray(obj)
+    info = Info(
+        objective=objective,
+        sweeps=max(len(objective) - 1, 0),
         converged=converged,
         colours=colours,
         qp_capped=capped,
         nonnegative=bool(nonnegative),
+        seconds=time.perf_counter() - t0,
     )
     return I, A, info
 
 
-def unpack_weights(indices, weights, m, *, sparse=False):
+def unpack_weights(
+    indices: ArrayLike, weights: ArrayLike, m: int, *, sparse: bool = False
+) -> NDArray[np.float64] | sp.csr_matrix:
     """Dense ``(n, m)`` (or ``scipy.sparse.csr_matrix`` with ``sparse=True``) view of packed weights.
 
     >>> import numpy as np, skinrs
@@ -347,7 +353,13 @@ def unpack_weights(indices, weights, m, *, sparse=False):
     return S if sparse else S.toarray()
 
 
-def deform(V, W, *, control_points=None, bone_transforms=None):
+def deform(
+    V: ArrayLike,
+    W: Packed | ArrayLike,
+    *,
+    control_points: ArrayLike | None = None,
+    bone_transforms: ArrayLike | None = None,
+) -> NDArray[np.float64]:
     """Deform rest vertices with full or packed weights (linear blend skinning / cage blending).
 
     ``x_v = sum_i W_vi c_i`` (cages) or ``x_v = sum_i W_vi A_i [v; 1]`` (bones).
@@ -371,7 +383,9 @@ def deform(V, W, *, control_points=None, bone_transforms=None):
     return X[0] if single else X
 
 
-def _handle_count(control_points, bone_transforms, m: int, packed: bool) -> int:
+def _handle_count(
+    control_points: ArrayLike | None, bone_transforms: ArrayLike | None, m: int, packed: bool
+) -> int:
     """Handle count of the poses: dense weights fix it, packed weights bound it from below."""
     X = control_points if control_points is not None else bone_transforms
     if X is None or not packed:
@@ -384,13 +398,14 @@ def _handle_count(control_points, bone_transforms, m: int, packed: bool) -> int:
     return mp
 
 
-def vertex_normals(V, F):
-    """Area-weighted unit vertex normals ``(n, 3)`` of a 3D triangle mesh
-    (:func:`skinrs.per_vertex_normals`)."""
-    return per_vertex_normals(V, F)
-
-
-def transform_normals(N, reduced, *, control_points=None, bone_transforms=None, C=None):
+def transform_normals(
+    N: ArrayLike,
+    reduced: Packed | ArrayLike,
+    *,
+    control_points: ArrayLike | None = None,
+    bone_transforms: ArrayLike | None = None,
+    C: ArrayLike | None = None,
+) -> NDArray[np.float64]:
     """Deform rest normals from (packed) weights without mesh adjacency (paper 002 Sec. 5).
 
     Skeletons: ``n' ~ (sum_i a_i A_i)^-T n``. Cages: the affine map fitted per vertex by weighted
@@ -426,7 +441,15 @@ def transform_normals(N, reduced, *, control_points=None, bone_transforms=None, 
     return X[0] if single else X
 
 
-def reduction_error(V, F, W, reduced, *, control_points=None, bone_transforms=None):
+def reduction_error(
+    V: ArrayLike,
+    F: ArrayLike,
+    W: ArrayLike,
+    reduced: Packed | ArrayLike,
+    *,
+    control_points: ArrayLike | None = None,
+    bone_transforms: ArrayLike | None = None,
+) -> ReductionError:
     """Paper 002 Sec. 6 metrics of reduced weights against the full weights over some poses.
 
     Both weight sets deform ``V``; normals are recomputed from each deformed mesh
@@ -451,8 +474,8 @@ def reduction_error(V, F, W, reduced, *, control_points=None, bone_transforms=No
     red = deform(V, reduced, control_points=control_points, bone_transforms=bone_transforms)
     if full.ndim == 2:
         full, red = full[None], red[None]
-    ang, nrms, prms = _skinrs.reduce_deformation_errors(F, full, red)
-    nrms, prms = np.asarray(nrms), np.asarray(prms)
+    ang, normal_rms, position_rms = _skinrs.reduce_deformation_errors(F, full, red)
+    nrms, prms = np.asarray(normal_rms), np.asarray(position_rms)
     return ReductionError(
         normal_angle=ang,
         normal_rms=nrms,
@@ -462,65 +485,29 @@ def reduction_error(V, F, W, reduced, *, control_points=None, bone_transforms=No
     )
 
 
-def _bones(C, BE):
+def _bones(C: ArrayLike, BE: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
     C = as_points(C, "C", dims=(3,))
     BE = as_index_array(BE, C.shape[0], "BE", cols=2, allow_empty=False)
     return C, BE
 
 
-def _quaternions(R: np.ndarray) -> np.ndarray:
-    """Unit quaternions ``(w, x, y, z)`` of rotation matrices ``R (m, 3, 3)`` (Shepperd's method:
-    the largest of the four squared components is computed first, for accuracy)."""
-    t = np.trace(R, axis1=1, axis2=2)
-    d = np.stack([t, R[:, 0, 0], R[:, 1, 1], R[:, 2, 2]], axis=1)
-    Q = np.empty((len(R), 4))
-    for b, (Rb, c) in enumerate(zip(R, d.argmax(1))):
-        if c == 0:
-            w = 0.5 * np.sqrt(1 + t[b])
-            Q[b] = [
-                w,
-                *(
-                    np.array([Rb[2, 1] - Rb[1, 2], Rb[0, 2] - Rb[2, 0], Rb[1, 0] - Rb[0, 1]])
-                    / (4 * w)
-                ),
-            ]
-        else:
-            i = c - 1
-            j, k = (i + 1) % 3, (i + 2) % 3
-            x = 0.5 * np.sqrt(1 + Rb[i, i] - Rb[j, j] - Rb[k, k])
-            q = np.empty(4)
-            q[0] = (Rb[k, j] - Rb[j, k]) / (4 * x)
-            q[1 + i] = x
-            q[1 + j] = (Rb[j, i] + Rb[i, j]) / (4 * x)
-            q[1 + k] = (Rb[k, i] + Rb[i, k]) / (4 * x)
-            Q[b] = q
-    return Q
-
-
-def forward_kinematics(C, BE, R):
-    """Absolute bone transforms ``(m, 3, 4)`` from per-bone rotation matrices ``R (m, 3, 3)``.
-
-    Bone ``b`` rotates about its head joint ``C[BE[b, 0]]`` and follows its parent bone (the one
-    ending at that joint): ``T_b = T_parent o [R_b | c - R_b c]``. This is
-    :func:`skinrs.forward_kinematics` with the rotations given as matrices.
-    """
-    R = _float_array(R, "R", 3)
-    if R.shape[1:] != (3, 3):
-        raise ValueError(f"R must have shape (m, 3, 3), got {R.shape}")
-    err = np.abs(np.einsum("bij,bkj->bik", R, R) - np.eye(3)).max() if len(R) else 0.0
-    if err > 1e-6 or np.any(np.linalg.det(R) <= 0):
-        raise ValueError("R must hold rotation matrices (orthonormal, determinant +1)")
-    return _fk(C, BE, _quaternions(R))
-
-
-def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
+def _rotation(axis: NDArray[np.float64], angle: float) -> NDArray[np.float64]:
     """Rodrigues' formula for a unit axis."""
     x, y, z = axis
     K = np.array([[0, -z, y], [z, 0, -x], [-y, x, 0]])
-    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * (K @ K)
+    R: NDArray[np.float64] = np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * (K @ K)
+    return R
 
 
-def random_skeleton_poses(C, BE, n_poses, *, max_angle=np.pi / 6, max_twist=None, seed=None):
+def random_skeleton_poses(
+    C: ArrayLike,
+    BE: ArrayLike,
+    n_poses: int,
+    *,
+    max_angle: float = np.pi / 6,
+    max_twist: float | None = None,
+    seed: int | np.random.Generator | None = None,
+) -> NDArray[np.float64]:
     """Random plausible skeleton poses: bounded bends and twists of every bone about its head.
 
     Relative to its parent, each bone bends about a uniformly random axis perpendicular to the
@@ -561,10 +548,10 @@ def random_skeleton_poses(C, BE, n_poses, *, max_angle=np.pi / 6, max_twist=None
         bend = rng.normal(size=(m, 3))
         bend -= (bend * axis).sum(1, keepdims=True) * axis  # perpendicular to the bone
         bend /= np.linalg.norm(bend, axis=1, keepdims=True)
-        angles = rng.uniform(-max_angle, max_angle, size=m)
-        twists = rng.uniform(-max_twist, max_twist, size=m)
+        angles = np.asarray(rng.uniform(-max_angle, max_angle, size=m))
+        twists = np.asarray(rng.uniform(-max_twist, max_twist, size=m))
         R = np.stack(
             [_rotation(b, a) @ _rotation(d, t) for b, a, d, t in zip(bend, angles, axis, twists)]
         )
-        out[p] = _fk(C, BE, _quaternions(R))
+        out[p] = forward_kinematics(C, BE, R)
     return out

@@ -8,10 +8,17 @@ row that caused it) instead of in a separate pass.
 
 from __future__ import annotations
 
+from typing import Any, overload
+
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from . import _skinrs
 from ._checks import as_index_array, as_points
+
+#: Skinning weights: dense ``(n, m)``, a packed pair ``(indices (n, k), weights (n, k))`` or a
+#: scipy.sparse ``(n, m)`` matrix.
+Weights = Any
 
 __all__ = [
     "bone_parents",
@@ -23,7 +30,7 @@ __all__ = [
 ]
 
 
-def _as_float_view(X, name: str, ndim: int) -> np.ndarray:
+def _as_float_view(X: ArrayLike, name: str, ndim: int) -> NDArray[np.float64]:
     """C-contiguous float64 array with ``ndim`` dimensions; copies only when needed.
 
     Finiteness is not checked here (the Rust kernels check their output and name the input).
@@ -41,7 +48,7 @@ def _as_float_view(X, name: str, ndim: int) -> np.ndarray:
     return np.ascontiguousarray(A, dtype=np.float64)
 
 
-def _as_index_view(X, name: str) -> np.ndarray:
+def _as_index_view(X: ArrayLike, name: str) -> NDArray[np.int64]:
     """C-contiguous int64 ``(n, k)`` index array; range checked by the Rust kernel."""
     A = np.asarray(X)
     if A.dtype == bool or not np.issubdtype(A.dtype, np.number) or np.iscomplexobj(A):
@@ -55,7 +62,7 @@ def _as_index_view(X, name: str) -> np.ndarray:
     return np.ascontiguousarray(A, dtype=np.int64)
 
 
-def _split_weights(W):
+def _split_weights(W: Weights) -> tuple[NDArray[np.float64], NDArray[np.int64] | None]:
     """``(weights, index or None)`` from dense ``W``, a packed pair, or a scipy.sparse matrix."""
     if isinstance(W, tuple):  # (indices, weights); a list is read as a dense matrix
         if len(W) != 2:
@@ -79,7 +86,7 @@ def _split_weights(W):
     return _as_float_view(W, "W", 2), None
 
 
-def _sparse_to_packed(W):
+def _sparse_to_packed(W: Any) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
     """Packs a sparse ``(n, m)`` matrix into ``k = max nonzeros per row`` influences."""
     R = W.tocsr()
     R.sum_duplicates()
@@ -95,7 +102,7 @@ def _sparse_to_packed(W):
     return Wk, I
 
 
-def _transforms(T, d: int) -> np.ndarray:
+def _transforms(T: ArrayLike, d: int) -> NDArray[np.float64]:
     T = _as_float_view(T, "T", 3)
     if T.shape[1:] != (d, d + 1):
         raise ValueError(
@@ -108,14 +115,16 @@ def _transforms(T, d: int) -> np.ndarray:
     return T
 
 
-def _points(V, name="V"):
+def _points(V: ArrayLike, name: str = "V") -> NDArray[np.float64]:
     V = _as_float_view(V, name, 2)
     if V.shape[1] not in (2, 3):
         raise ValueError(f"{name} must have shape (n, 2) or (n, 3), got {V.shape}")
     return V
 
 
-def _check_out(out, shape):
+def _check_out(
+    out: NDArray[np.float64] | None, shape: tuple[int, ...]
+) -> NDArray[np.float64] | None:
     if out is None:
         return None
     if not isinstance(out, np.ndarray) or out.dtype != np.float64:
@@ -127,7 +136,27 @@ def _check_out(out, shape):
     return out
 
 
-def lbs(V, W, T, N=None, out=None):
+@overload
+def lbs(
+    V: ArrayLike,
+    W: Weights,
+    T: ArrayLike,
+    *,
+    N: None = None,
+    out: NDArray[np.float64] | None = None,
+) -> NDArray[np.float64]: ...
+@overload
+def lbs(
+    V: ArrayLike, W: Weights, T: ArrayLike, *, N: ArrayLike, out: NDArray[np.float64] | None = None
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]: ...
+def lbs(
+    V: ArrayLike,
+    W: Weights,
+    T: ArrayLike,
+    *,
+    N: ArrayLike | None = None,
+    out: NDArray[np.float64] | None = None,
+) -> NDArray[np.float64] | tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Linear blend skinning: ``U[i] = sum_j W[i, j] (R_j V[i] + t_j)``.
 
     Parameters
@@ -171,10 +200,30 @@ def lbs(V, W, T, N=None, out=None):
     Nv = None if N is None else _as_float_view(N, "N", 2)
     out = _check_out(out, V.shape)
     U, NU = _skinrs.lbs(V, Wv, T, index=I, N=Nv, out=out)
-    return U if N is None else (U, NU)
+    return U if NU is None else (U, NU)
 
 
-def dqs(V, W, T, N=None, out=None):
+@overload
+def dqs(
+    V: ArrayLike,
+    W: Weights,
+    T: ArrayLike,
+    *,
+    N: None = None,
+    out: NDArray[np.float64] | None = None,
+) -> NDArray[np.float64]: ...
+@overload
+def dqs(
+    V: ArrayLike, W: Weights, T: ArrayLike, *, N: ArrayLike, out: NDArray[np.float64] | None = None
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]: ...
+def dqs(
+    V: ArrayLike,
+    W: Weights,
+    T: ArrayLike,
+    *,
+    N: ArrayLike | None = None,
+    out: NDArray[np.float64] | None = None,
+) -> NDArray[np.float64] | tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Dual-quaternion skinning (Kavan et al. 2008) of rigid handle transforms.
 
     The rigid motions are blended as unit dual quaternions (each influence taken in the
@@ -224,14 +273,14 @@ def dqs(V, W, T, N=None, out=None):
         if out is None:
             out = np.empty(V.shape)
         out[:] = U3[:, :2]
-        return out if N is None else (out, np.ascontiguousarray(NU[:, :2]))
+        return out if NU is None else (out, np.ascontiguousarray(NU[:, :2]))
     T = _transforms(T, 3)
     Nv = None if N is None else _as_float_view(N, "N", 2)
     U, NU = _skinrs.dqs(V, Wv, T, index=I, N=Nv, out=out)
-    return U if N is None else (U, NU)
+    return U if NU is None else (U, NU)
 
 
-def bone_parents(BE, n_joints: int | None = None) -> np.ndarray:
+def bone_parents(BE: ArrayLike, *, n_joints: int | None = None) -> NDArray[np.int64]:
     """Parent bone of each bone from directed edges (-1 for a root).
 
     Bone ``b``'s parent is the bone that ends at joint ``BE[b, 0]``. The bones may form a forest;
@@ -250,7 +299,7 @@ def bone_parents(BE, n_joints: int | None = None) -> np.ndarray:
     return _skinrs.bone_parents(BE, int(n_joints))
 
 
-def forward_kinematics(C, BE, Q) -> np.ndarray:
+def forward_kinematics(C: ArrayLike, BE: ArrayLike, Q: ArrayLike) -> NDArray[np.float64]:
     """Absolute bone transforms from relative rotations about each bone's rest start joint.
 
     Bone ``b`` rotates by ``Q[b]`` about its rest start joint ``C[BE[b, 0]]``, after its parent's
@@ -263,9 +312,10 @@ def forward_kinematics(C, BE, Q) -> np.ndarray:
         Rest joint positions (or (n, 2) for a 2D skeleton).
     BE : (m, 2) int array
         Directed bone edges, parent joint -> child joint.
-    Q : (m, 4) float array
+    Q : (m, 4) or (m, 3, 3) float array
         Unit quaternions ``(w, x, y, z)`` (rows within 1e-3 of unit length are normalised,
-        others raise ``ValueError``). For a 2D skeleton, ``Q`` is ``(m,)`` angles in radians.
+        others raise ``ValueError``), or rotation matrices (orthonormal within 1e-6,
+        determinant +1). For a 2D skeleton, ``Q`` is ``(m,)`` angles in radians.
 
     Returns
     -------
@@ -285,25 +335,63 @@ def forward_kinematics(C, BE, Q) -> np.ndarray:
     C = as_points(C, "C", dims=(2, 3))
     BE = as_index_array(BE, C.shape[0], "BE", cols=2)
     if C.shape[1] == 2:
-        theta = _as_float_view(Q, "Q", np.ndim(Q)).reshape(-1)
-        if theta.shape[0] != BE.shape[0]:
-            raise ValueError(
-                f"for a 2D skeleton Q must hold one angle per bone ({BE.shape[0]}), "
-                f"got shape {np.shape(Q)}"
-            )
-        if not np.all(np.isfinite(theta)):
-            raise ValueError("Q has a NaN or infinite angle")
-        Q4 = np.zeros((len(theta), 4))
-        Q4[:, 0] = np.cos(theta / 2)
-        Q4[:, 3] = np.sin(theta / 2)
-        C3 = np.hstack([C, np.zeros((C.shape[0], 1))])
-        T3 = _skinrs.forward_kinematics(C3, BE, Q4)
-        return np.ascontiguousarray(T3[:, :2][:, :, [0, 1, 3]])
-    Q = _as_float_view(Q, "Q", 2)
-    return _skinrs.forward_kinematics(C, BE, Q)
+        return _forward_kinematics_2d(C, BE, Q)
+    if np.ndim(Q) == 3:
+        return _skinrs.forward_kinematics(C, BE, _quaternions_from_matrices(Q))
+    return _skinrs.forward_kinematics(C, BE, _as_float_view(Q, "Q", 2))
 
 
-def quaternions_from_xyzw(Q) -> np.ndarray:
+def _forward_kinematics_2d(
+    C: NDArray[np.float64], BE: NDArray[np.int64], angles: ArrayLike
+) -> NDArray[np.float64]:
+    """2D skeleton: one angle per bone, as rotations about z of the skeleton at z = 0."""
+    theta = _as_float_view(angles, "Q", np.ndim(angles)).reshape(-1)
+    if theta.shape[0] != BE.shape[0]:
+        raise ValueError(
+            f"for a 2D skeleton Q must hold one angle per bone ({BE.shape[0]}), "
+            f"got shape {np.shape(angles)}"
+        )
+    if not np.all(np.isfinite(theta)):
+        raise ValueError("Q has a NaN or infinite angle")
+    Q4 = np.zeros((len(theta), 4))
+    Q4[:, 0] = np.cos(theta / 2)
+    Q4[:, 3] = np.sin(theta / 2)
+    C3 = np.hstack([C, np.zeros((C.shape[0], 1))])
+    T3 = _skinrs.forward_kinematics(C3, BE, Q4)
+    return np.ascontiguousarray(T3[:, :2][:, :, [0, 1, 3]])
+
+
+def _quaternions_from_matrices(R: ArrayLike) -> NDArray[np.float64]:
+    """Unit quaternions ``(w, x, y, z)`` of rotation matrices ``R (m, 3, 3)`` (Shepperd's method:
+    the largest of the four squared components is computed first, for accuracy)."""
+    R = _as_float_view(R, "Q", 3)
+    if R.shape[1:] != (3, 3):
+        raise ValueError(f"rotation matrices Q must have shape (m, 3, 3), got {R.shape}")
+    if not np.all(np.isfinite(R)):
+        raise ValueError("Q has a NaN or infinite entry")
+    err = np.abs(np.einsum("bij,bkj->bik", R, R) - np.eye(3)).max() if len(R) else 0.0
+    if err > 1e-6 or np.any(np.linalg.det(R) <= 0):
+        raise ValueError("Q must hold rotation matrices (orthonormal, determinant +1)")
+    t = np.trace(R, axis1=1, axis2=2)
+    d = np.stack([t, R[:, 0, 0], R[:, 1, 1], R[:, 2, 2]], axis=1)
+    Q = np.empty((len(R), 4))
+    for b, (Rb, c) in enumerate(zip(R, d.argmax(1), strict=True)):
+        if c == 0:
+            w = 0.5 * np.sqrt(1 + t[b])
+            Q[b] = [w, Rb[2, 1] - Rb[1, 2], Rb[0, 2] - Rb[2, 0], Rb[1, 0] - Rb[0, 1]]
+            Q[b, 1:] /= 4 * w
+        else:
+            i = c - 1
+            j, k = (i + 1) % 3, (i + 2) % 3
+            x = 0.5 * np.sqrt(1 + Rb[i, i] - Rb[j, j] - Rb[k, k])
+            Q[b, 0] = (Rb[k, j] - Rb[j, k]) / (4 * x)
+            Q[b, 1 + i] = x
+            Q[b, 1 + j] = (Rb[j, i] + Rb[i, j]) / (4 * x)
+            Q[b, 1 + k] = (Rb[k, i] + Rb[i, k]) / (4 * x)
+    return Q
+
+
+def quaternions_from_xyzw(Q: ArrayLike) -> NDArray[np.float64]:
     """Reorders libigl/Eigen storage ``(x, y, z, w)`` to skinrs' ``(w, x, y, z)``.
 
     Accepts a flat ``(4m,)`` or ``(4m, 1)`` column (as read from ``hand-pose.dmat``: bone ``b``'s
@@ -329,7 +417,7 @@ def quaternions_from_xyzw(Q) -> np.ndarray:
     return np.ascontiguousarray(X[:, [3, 0, 1, 2]])
 
 
-def per_vertex_normals(V, F) -> np.ndarray:
+def per_vertex_normals(V: ArrayLike, F: ArrayLike) -> NDArray[np.float64]:
     """Area-weighted unit vertex normals of a triangle mesh.
 
     Each vertex gets the normalised sum of its faces' ``(v1 - v0) x (v2 - v0)`` (as libigl's

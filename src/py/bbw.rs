@@ -5,10 +5,15 @@ use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2}
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use super::{index_array, released, to_pyerr, PyProgress};
+use super::{index_array, released, to_pyerr, Choices, PyProgress};
 use crate::bbw::{bbw_dual, BbwOptions, EliminatedProblem, Solver};
-use crate::constraints::boundary_conditions;
+use crate::constraints::{boundary_conditions, DEFAULT_TOL};
 use crate::sparse::Csc;
+
+const SOLVERS: Choices<Solver> = Choices(&[
+    ("active-set", Solver::ActiveSet),
+    ("lbfgs-squared", Solver::LbfgsSquared),
+]);
 
 type BoundaryConditionsOut<'py> = (Bound<'py, PyArray1<i64>>, Bound<'py, PyArray2<f64>>);
 
@@ -69,7 +74,9 @@ pub(crate) fn csc_from_parts(
 }
 
 #[pyfunction]
-#[pyo3(name = "_bbw_dual")]
+#[pyo3(name = "_bbw_dual", signature = (b_data, b_indices, b_indptr, n, b, bc, *, solver, tol,
+                                        max_iter, partition_of_unity, seed, lbfgs_memory,
+                                        callback))]
 #[allow(clippy::too_many_arguments)]
 fn py_bbw_dual<'py>(
     py: Python<'py>,
@@ -84,7 +91,7 @@ fn py_bbw_dual<'py>(
     max_iter: usize,
     partition_of_unity: bool,
     seed: u64,
-    memory: usize,
+    lbfgs_memory: usize,
     callback: Option<Py<PyAny>>,
 ) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, PyDict>)> {
     let bmat = csc_from_parts(
@@ -108,12 +115,12 @@ fn py_bbw_dual<'py>(
         .collect::<PyResult<_>>()?;
     let bc = bc.as_array().to_owned();
     let opts = BbwOptions {
-        solver: Solver::parse(solver).map_err(to_pyerr)?,
+        solver: SOLVERS.parse("solver", solver)?,
         tol,
         max_iter,
         partition_of_unity,
         seed,
-        memory: memory.max(1),
+        memory: lbfgs_memory.max(1),
     };
     let mut progress = PyProgress::new(callback);
     let (w, info): (Array2<f64>, _) = released(py, || {
@@ -144,8 +151,23 @@ fn py_bbw_dual<'py>(
     Ok((w.into_pyarray(py), d))
 }
 
+/// The defaults of `bbw_dual_constrained`'s options, keyed by their Python names.
+fn bbw_defaults(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
+    let o = BbwOptions::default();
+    let d = PyDict::new(py);
+    d.set_item("solver", SOLVERS.name(o.solver))?;
+    d.set_item("tol", o.tol)?;
+    d.set_item("max_iter", o.max_iter)?;
+    d.set_item("partition_of_unity", o.partition_of_unity)?;
+    d.set_item("seed", o.seed)?;
+    d.set_item("lbfgs_memory", o.memory)?;
+    Ok(d)
+}
+
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(py_boundary_conditions, m)?)?;
     m.add_function(wrap_pyfunction!(py_bbw_dual, m)?)?;
-    Ok(())
+    SOLVERS.register(m, "BBW_SOLVERS")?;
+    m.add("BBW_DEFAULTS", bbw_defaults(m.py())?)?;
+    m.add("BOUNDARY_TOL", DEFAULT_TOL)
 }

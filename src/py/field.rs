@@ -162,6 +162,34 @@ fn opt<'py, T: for<'a> FromPyObject<'a, 'py>>(
     }
 }
 
+/// App. A defaults of the field options for dimension `d`, keyed by their Python names (those
+/// [`options`] reads).
+#[pyfunction]
+fn _field_defaults(py: Python<'_>, d: usize) -> PyResult<Bound<'_, PyDict>> {
+    let x = FieldOptions::defaults(d);
+    let o = PyDict::new(py);
+    o.set_item("n_points", x.n_init)?;
+    o.set_item("samples", x.samples)?;
+    o.set_item("steps", x.steps)?;
+    o.set_item("upsamples", x.upsamples)?;
+    o.set_item("lr", x.lr)?;
+    o.set_item("lr_decay", x.lr_decay)?;
+    o.set_item("beta1", x.beta1)?;
+    o.set_item("beta2", x.beta2)?;
+    o.set_item("adam_eps", x.adam_eps)?;
+    o.set_item("h", x.h_sigma)?;
+    o.set_item("eps", x.eps_sigma)?;
+    o.set_item("neumann", x.neumann)?;
+    o.set_item("visibility", x.visibility)?;
+    o.set_item("wn_l", x.wn_l)?;
+    o.set_item("wn_h", x.wn_h)?;
+    o.set_item("seed", x.seed)?;
+    o.set_item("pool", x.pool)?;
+    o.set_item("cache_visibility", x.cache_visibility)?;
+    o.set_item("skip_rays", x.skip_rays)?;
+    Ok(o)
+}
+
 fn options(d: usize, o: &Bound<'_, PyDict>) -> PyResult<FieldOptions> {
     let x = FieldOptions::defaults(d);
     Ok(FieldOptions {
@@ -404,5 +432,6 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(_segment_hits, m)?)?;
     m.add_function(wrap_pyfunction!(_closest_point, m)?)?;
     m.add_function(wrap_pyfunction!(_knn_distance, m)?)?;
+    m.add_function(wrap_pyfunction!(_field_defaults, m)?)?;
     Ok(())
 }

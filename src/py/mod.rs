@@ -10,6 +10,7 @@ use numpy::{IntoPyArray, PyArray1, PyReadonlyArray2};
 use pyo3::create_exception;
 use pyo3::exceptions::{PyKeyboardInterrupt, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
+use pyo3::types::PyTuple;
 
 use crate::error::{SkinError, SkinResult};
 use crate::progress::{Event, Progress};
@@ -33,6 +34,35 @@ thread_local! {
     /// The exception a progress callback raised, re-raised unchanged once the computation has
     /// stopped (so a `KeyboardInterrupt` or the user's own exception type reaches the caller).
     static CALLBACK_ERROR: RefCell<Option<PyErr>> = const { RefCell::new(None) };
+}
+
+/// The names of a string option and the values they stand for. The bindings parse with it and
+/// register the names in the module, where the Python layer reads its choice lists.
+pub(crate) struct Choices<T: 'static>(pub(crate) &'static [(&'static str, T)]);
+
+impl<T: Copy + PartialEq> Choices<T> {
+    pub(crate) fn parse(&self, what: &str, s: &str) -> PyResult<T> {
+        match self.0.iter().find(|(name, _)| *name == s) {
+            Some(&(_, v)) => Ok(v),
+            None => Err(PyValueError::new_err(format!(
+                "{what} must be one of {:?}, got {s:?}",
+                self.names()
+            ))),
+        }
+    }
+
+    pub(crate) fn name(&self, v: T) -> &'static str {
+        self.0.iter().find(|(_, x)| *x == v).map_or("", |&(n, _)| n)
+    }
+
+    pub(crate) fn names(&self) -> Vec<&'static str> {
+        self.0.iter().map(|&(n, _)| n).collect()
+    }
+
+    /// Adds the names to the module as the tuple `key`.
+    pub(crate) fn register(&self, m: &Bound<'_, PyModule>, key: &str) -> PyResult<()> {
+        m.add(key, PyTuple::new(m.py(), self.names())?)
+    }
 }
 
 /// Maps the crate's error to the Python exception the user should see.
@@ -183,6 +213,7 @@ fn _skinrs(m: &Bound<'_, PyModule>) -> PyResult<()> {
     // docs/benchmarks.md); rayon parallelism is used for assembly and independent work instead.
     faer::set_global_parallelism(faer::Par::Seq);
     m.add("InternalError", m.py().get_type::<InternalError>())?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     operators::register(m)?;
     bbw::register(m)?;
     skin::register(m)?;

@@ -3,21 +3,15 @@
 //! re-checked here so no Rust code ever sees an out-of-range index.
 
 use numpy::{IntoPyArray, PyArray1, PyReadonlyArray2};
-use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
-use super::{index_array, released, sparse_out, SparseParts};
+use super::{index_array, released, sparse_out, Choices, SparseParts};
 use crate::operators::{self, MassKind};
 
-fn mass_kind(kind: &str) -> PyResult<MassKind> {
-    match kind {
-        "voronoi" => Ok(MassKind::Voronoi),
-        "barycentric" => Ok(MassKind::Barycentric),
-        other => Err(PyValueError::new_err(format!(
-            "mass kind must be 'voronoi' or 'barycentric', got {other:?}"
-        ))),
-    }
-}
+const MASS_KINDS: Choices<MassKind> = Choices(&[
+    ("voronoi", MassKind::Voronoi),
+    ("barycentric", MassKind::Barycentric),
+]);
 
 #[pyfunction]
 fn _cotan_laplacian<'py>(
@@ -38,7 +32,7 @@ fn _massmatrix<'py>(
     f: PyReadonlyArray2<'py, i64>,
     kind: &str,
 ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-    let kind = mass_kind(kind)?;
+    let kind = MASS_KINDS.parse("mass kind", kind)?;
     let vv = v.as_array();
     let ff = index_array(&f, vv.nrows(), "F")?;
     let m = released(py, || operators::massmatrix(vv, ff.view(), kind))?;
@@ -52,7 +46,7 @@ fn _biharmonic_matrix<'py>(
     f: PyReadonlyArray2<'py, i64>,
     kind: &str,
 ) -> PyResult<SparseParts<'py>> {
-    let kind = mass_kind(kind)?;
+    let kind = MASS_KINDS.parse("mass kind", kind)?;
     let vv = v.as_array();
     let ff = index_array(&f, vv.nrows(), "F")?;
     let b = released(py, || operators::biharmonic_matrix(vv, ff.view(), kind))?;
@@ -76,5 +70,5 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(_massmatrix, m)?)?;
     m.add_function(wrap_pyfunction!(_biharmonic_matrix, m)?)?;
     m.add_function(wrap_pyfunction!(_connected_components, m)?)?;
-    Ok(())
+    MASS_KINDS.register(m, "MASS_KINDS")
 }

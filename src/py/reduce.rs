@@ -9,8 +9,26 @@ use numpy::{
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
-use super::{index_array, released, to_pyerr, weights_view, PyProgress};
+use pyo3::types::PyDict;
+
+use super::{index_array, released, weights_view, Choices, PyProgress};
 use crate::reduce::{self, qp, Energy, Method, Poses, ReduceOptions, Solver};
+
+const METHODS: Choices<Method> = Choices(&[
+    ("k-largest", Method::KLargest),
+    ("smooth", Method::Smooth),
+    ("geometric", Method::Geometric),
+    ("poisson", Method::Poisson),
+]);
+const ENERGIES: Choices<Energy> = Choices(&[
+    ("gradient", Energy::Gradient),
+    ("laplacian", Energy::SquaredLaplacian),
+]);
+const SOLVERS: Choices<Solver> = Choices(&[
+    ("auto", Solver::Auto),
+    ("local", Solver::Local),
+    ("cg", Solver::Cg),
+]);
 
 fn poses<'a>(
     control_points: &'a Option<PyReadonlyArray3<'_, f64>>,
@@ -49,9 +67,8 @@ type ReduceOut<'py> = (
 
 /// Weight reduction; returns (indices, weights, objective per sweep, converged, colours, qp_capped).
 #[pyfunction]
-#[pyo3(signature = (w, k, method, v=None, f=None, control_points=None, bone_transforms=None,
-                    c=None, nonnegative=false, max_sweeps=1000, tol=1e-4, relaxation=1.9,
-                    energy="gradient", solver="auto", callback=None))]
+#[pyo3(signature = (w, k, method, *, v, f, control_points, bone_transforms, c, nonnegative,
+                    max_sweeps, tol, relaxation, energy, solver, callback))]
 #[allow(clippy::too_many_arguments)]
 fn reduce_weights<'py>(
     py: Python<'py>,
@@ -71,9 +88,9 @@ fn reduce_weights<'py>(
     solver: &str,
     callback: Option<Py<PyAny>>,
 ) -> PyResult<ReduceOut<'py>> {
-    let method = Method::parse(method).map_err(to_pyerr)?;
-    let energy = Energy::parse(energy).map_err(to_pyerr)?;
-    let solver = Solver::parse(solver).map_err(to_pyerr)?;
+    let method = METHODS.parse("method", method)?;
+    let energy = ENERGIES.parse("energy", energy)?;
+    let solver = SOLVERS.parse("solver", solver)?;
     let nv = v.as_ref().map_or(0, |v| v.as_array().nrows());
     let f = match &f {
         Some(f) => Some(index_array(f, nv, "F")?),
@@ -237,7 +254,23 @@ fn _reduce_local_qp<'py>(
     ))
 }
 
+/// The defaults of `reduce_weights`' options, keyed by their Python names.
+fn reduce_defaults(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
+    let o = ReduceOptions::default();
+    let d = PyDict::new(py);
+    d.set_item("max_sweeps", o.max_sweeps)?;
+    d.set_item("tol", o.tol)?;
+    d.set_item("relaxation", o.relaxation)?;
+    d.set_item("energy", ENERGIES.name(o.energy))?;
+    d.set_item("solver", SOLVERS.name(o.solver))?;
+    Ok(d)
+}
+
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    METHODS.register(m, "REDUCE_METHODS")?;
+    ENERGIES.register(m, "REDUCE_ENERGIES")?;
+    SOLVERS.register(m, "REDUCE_SOLVERS")?;
+    m.add("REDUCE_DEFAULTS", reduce_defaults(m.py())?)?;
     m.add_function(wrap_pyfunction!(reduce_weights, m)?)?;
     m.add_function(wrap_pyfunction!(reduce_deform, m)?)?;
     m.add_function(wrap_pyfunction!(reduce_transform_normals, m)?)?;

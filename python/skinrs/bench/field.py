@@ -179,7 +179,7 @@ def main(argv=None) -> int:
 
     # Segment tests: sigma as the method would pick it for 64k interior-ish samples.
     X = Q[: min(n, 64_000)]
-    sigma = float(np.median(skinrs.knn_distance(X, 9)))
+    sigma = float(np.median(skinrs.knn_distance(X, k=9)))
     P = Q
     R = rng.uniform(lo - pad, hi + pad, size=(n, 3))
     h = n // 2
@@ -188,7 +188,7 @@ def main(argv=None) -> int:
     t_seg, vis = _best(lambda: skinrs.segment_visible(V, F, P, R), args.repeat)
     t_short, _ = _best(lambda: skinrs.segment_visible(V, F, P[:h], R[:h]), args.repeat)
     t_build, _ = _best(lambda: skinrs.segment_visible(V, F, P[:1], R[:1]), args.repeat)
-    t_knn, _ = _best(lambda: skinrs.knn_distance(X, 9), args.repeat)
+    t_knn, _ = _best(lambda: skinrs.knn_distance(X, k=9), args.repeat)
     print(f"BVH build (one segment query): {1e3 * t_build:.1f} ms")
     for name, m, t in [
         (f"mixed, {vis.mean():.0%} visible", n, t_seg),

@@ -52,14 +52,14 @@ def main(argv=None) -> int:
         rows.append(
             (
                 f"M massmatrix {kind}",
-                lambda k=kind: skinrs.massmatrix(V, T, k),
+                lambda k=kind: skinrs.massmatrix(V, T, kind=k),
                 lambda k=kind: igl.massmatrix(V, T, kinds[k]),
             )
         )
         rows.append(
             (
                 f"B biharmonic {kind}",
-                lambda k=kind: skinrs.biharmonic_matrix(V, T, k),
+                lambda k=kind: skinrs.biharmonic_matrix(V, T, mass=k),
                 lambda k=kind: igl_B(k),
             )
         )

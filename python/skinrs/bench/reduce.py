@@ -126,7 +126,15 @@ def run_methods(V, F, W, P, k, nonneg, **kw):
     for method in METHODS:
         t, out = timed(
             lambda method=method: skinrs.reduce_weights(
-                W, k, method, V=V, F=F, control_points=P, nonnegative=nonneg, return_info=True, **kw
+                W,
+                k,
+                method=method,
+                V=V,
+                F=F,
+                control_points=P,
+                nonnegative=nonneg,
+                return_info=True,
+                **kw,
             )
         )
         times[method], infos[method] = t, out[2]
@@ -222,7 +230,7 @@ def main(argv=None) -> int:
                         lambda: skinrs.reduce_weights(
                             W,
                             k,
-                            "poisson",
+                            method="poisson",
                             V=Vs,
                             F=Fs,
                             control_points=P,

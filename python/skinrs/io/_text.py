@@ -6,14 +6,16 @@ from __future__ import annotations
 import functools
 import os
 import re
+from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 
 class _Source:
     """A text file, able to build ``ValueError``s that name file and line."""
 
-    def __init__(self, path):
+    def __init__(self, path: str | os.PathLike[str]) -> None:
         self.name = os.fspath(path)
         with open(self.name, "rb") as fh:
             data = fh.read()
@@ -56,7 +58,7 @@ def _to_int(tok: str) -> int | None:
         return None
 
 
-def _bulk(tokens, dtype):
+def _bulk(tokens: list[str], dtype: type) -> NDArray[Any] | None:
     """Convert a list of strings to an array, or return None when any token is not a number."""
     try:
         return np.array(tokens, dtype=dtype)
@@ -64,7 +66,7 @@ def _bulk(tokens, dtype):
         return None
 
 
-def _first_bad(tokens, dtype) -> int:
+def _first_bad(tokens: list[str], dtype: type) -> int:
     """Position of the first token that is not a number (or an integer outside int64)."""
     for k, t in enumerate(tokens):
         if dtype == np.int64:
@@ -76,22 +78,22 @@ def _first_bad(tokens, dtype) -> int:
     return len(tokens)
 
 
-def _kind(dtype) -> str:
+def _kind(dtype: type) -> str:
     return "an integer" if dtype == np.int64 else "a number"
 
 
-def _write_lines(path, lines) -> None:
+def _write_lines(path: str | os.PathLike[str], lines: list[str]) -> None:
     with open(os.fspath(path), "w", encoding="utf-8", newline="\n") as fh:
         fh.write("\n".join(lines))
         fh.write("\n")
 
 
-def _float_rows(A: np.ndarray, prefix: str = "") -> list[str]:
+def _float_rows(A: NDArray[Any], prefix: str = "") -> list[str]:
     """Rows of ``A`` as text, each value written as the shortest string that reads back exactly."""
     return [prefix + " ".join(map(repr, row)) for row in A.tolist()]
 
 
-def _int_rows(A: np.ndarray, prefix: str = "", suffix: str = "") -> list[str]:
+def _int_rows(A: NDArray[Any], prefix: str = "", suffix: str = "") -> list[str]:
     return [prefix + " ".join(map(str, row)) + suffix for row in A.tolist()]
 
 
@@ -105,7 +107,7 @@ def _line_of_token(lines: list[str], k: int) -> int:
     return len(lines)
 
 
-def _pad_z(V: np.ndarray) -> np.ndarray:
+def _pad_z(V: NDArray[Any]) -> NDArray[Any]:
     if V.shape[1] == 3:
         return V
     return np.hstack([V, np.zeros((V.shape[0], 1))])

@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import os
+from typing import cast
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from ._text import _bulk, _decode, _first_bad, _line_of_token, _to_int
 
 
-def read_dmat(path) -> np.ndarray:
+def read_dmat(path: str | os.PathLike[str]) -> NDArray[np.float64]:
     """Read a libigl ``.dmat`` matrix, ASCII or binary.
 
     ASCII: a line ``cols rows`` then ``cols*rows`` numbers in column-major order.
@@ -56,7 +58,7 @@ def _dmat_header(name: str, lineno: int, line: bytes) -> tuple[int, int]:
             f"{name}: line {lineno}: expected a header 'cols rows' of two non-negative "
             f"integers, got {_decode(line)[:60]!r}"
         )
-    return vals[0], vals[1]
+    return cast(int, vals[0]), cast(int, vals[1])
 
 
 def _dmat_binary(name: str, payload: bytes, rows: int, cols: int) -> np.ndarray:
@@ -95,7 +97,7 @@ def _dmat_ascii(name: str, text: str, rows: int, cols: int) -> np.ndarray:
     return np.ascontiguousarray(flat.reshape(cols, rows).T)
 
 
-def write_dmat(path, W, binary: bool = False) -> None:
+def write_dmat(path: str | os.PathLike[str], W: ArrayLike, *, binary: bool = False) -> None:
     """Write a matrix as a libigl ``.dmat`` file (column-major, values read back exactly).
 
     Parameters

@@ -2,7 +2,12 @@
 
 from __future__ import annotations
 
+import os
+from collections.abc import Callable
+from typing import Any
+
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from .._checks import as_index_array, as_points
 from ._text import (
@@ -19,7 +24,7 @@ from ._text import (
 )
 
 # Sections we understand but do not return: tokens per entry (given the dimension d).
-_MESH_SKIPPED = {
+_MESH_SKIPPED: dict[str, Callable[[int], int]] = {
     "edges": lambda d: 3,
     "corners": lambda d: 1,
     "ridges": lambda d: 1,
@@ -67,7 +72,7 @@ class _MeshTokens:
             raise self.error_at(k, f"expected the number of entries after {keyword!r}, got {t!r}")
         return v
 
-    def block(self, n: int, width: int, dtype, keyword: str) -> np.ndarray:
+    def block(self, n: int, width: int, dtype: type, keyword: str) -> NDArray[Any]:
         """The next ``n`` entries of ``width`` numbers each, as an (n, width) array."""
         start, stop = self.pos, self.pos + n * width
         chunk = self.toks[start:stop]
@@ -88,7 +93,9 @@ class _MeshTokens:
         return self.error_at(start + row * width, what)
 
 
-def read_mesh(path):
+def read_mesh(
+    path: str | os.PathLike[str],
+) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.int64]]:
     """Read a MEDIT ASCII ``.mesh`` tet mesh (as written by libigl, TetGen, TetWild).
 
     Reads ``Vertices`` (dropping the reference column), ``Tetrahedra`` and ``Triangles``
@@ -185,7 +192,9 @@ def _check_finite(tk: _MeshTokens, V: np.ndarray, start: int, width: int, word: 
         raise tk.entry_error(start, width, r, f"non-finite coordinate in {word} entry {r + 1}")
 
 
-def _check_indices(tk, E: np.ndarray, n: int, start: int, width: int, word: str) -> np.ndarray:
+def _check_indices(
+    tk: _MeshTokens, E: NDArray[Any], n: int, start: int, width: int, word: str
+) -> NDArray[Any]:
     bad = (E < 1) | (E > n)
     if bad.any():
         r, c = (int(x) for x in np.argwhere(bad)[0])
@@ -198,7 +207,9 @@ def _check_indices(tk, E: np.ndarray, n: int, start: int, width: int, word: str)
     return np.ascontiguousarray(E - 1)
 
 
-def write_mesh(path, V, T, F=None) -> None:
+def write_mesh(
+    path: str | os.PathLike[str], V: ArrayLike, T: ArrayLike, F: ArrayLike | None = None
+) -> None:
     """Write a MEDIT ASCII ``.mesh`` file (1-based indices, reference 0 everywhere).
 
     Parameters

@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import itertools
+import os
 import re
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from .._checks import as_index_array, as_points
 from ._text import (
@@ -28,7 +31,9 @@ _OBJ_IGNORED = frozenset(
 _SLASH_TAIL = re.compile(r"/\S*")
 
 
-def read_obj(path, return_polygons: bool = False, dim: int | None = None):
+def read_obj(
+    path: str | os.PathLike[str], *, return_polygons: bool = False, dim: int | None = None
+) -> Any:
     """Read the vertices and faces of a Wavefront ``.obj`` file.
 
     Faces may be written ``i``, ``i/t``, ``i//n`` or ``i/t/n`` (only the vertex index is
@@ -88,7 +93,7 @@ _OBJ_V3 = re.compile(r"^[ \t]*v[ \t]+(\S+)[ \t]+(\S+)[ \t]+(\S+)[ \t\r]*$", re.M
 _OBJ_F = re.compile(r"^[ \t]*f[ \t]+(.*)$", re.MULTILINE)
 
 
-def _obj_parse_fast(src: _Source):
+def _obj_parse_fast(src: _Source) -> tuple[NDArray[Any], NDArray[Any], NDArray[Any]] | None:
     """(V, flat face indices, face sizes) with regexes over the whole text, or None."""
     text = _COMMENT.sub("", src.text) if "#" in src.text else src.text
     kws = _OBJ_KEYWORD.findall(text)
@@ -119,7 +124,7 @@ def _obj_parse_fast(src: _Source):
     return V, idx, sizes
 
 
-def _obj_parse_checked(src: _Source):
+def _obj_parse_checked(src: _Source) -> tuple[NDArray[Any], NDArray[Any], NDArray[Any]]:
     """Line-by-line OBJ reader that reports the first problem with its line number."""
     vtoks: list[str] = []
     vlines: list[int] = []
@@ -168,8 +173,8 @@ def _obj_parse_checked(src: _Source):
         r = int(np.argwhere(bad)[0][0])
         raise src.error(vlines[r], "non-finite vertex coordinate")
     sizes = np.asarray(fsizes, dtype=np.int64)
-    raw = _face_index_values(ftoks)
-    if raw is None:
+    values = _face_index_values(ftoks)
+    if values is None:
         k = 0
         for f, size in enumerate(fsizes):
             for t in ftoks[k : k + size]:
@@ -177,8 +182,9 @@ def _obj_parse_checked(src: _Source):
                 if v is None or abs(v) >= 2**62:
                     raise src.error(flines[f], f"expected a vertex index in a face, got {t!r}")
             k += size
+    assert values is not None  # the loop above raised on the token that is not an index
     n = V.shape[0]
-    idx, bad = _resolve_face_indices(raw, sizes, np.asarray(fnv, dtype=np.int64), n)
+    idx, bad = _resolve_face_indices(values, sizes, np.asarray(fnv, dtype=np.int64), n)
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
         f = int(np.searchsorted(np.cumsum(sizes), k, side="right"))
@@ -201,7 +207,9 @@ def _face_index_values(ftoks: list[str]) -> np.ndarray | None:
     return _bulk(flat, np.int64)
 
 
-def _resolve_face_indices(raw, sizes, fnv, n: int):
+def _resolve_face_indices(
+    raw: NDArray[Any], sizes: NDArray[Any], fnv: NDArray[Any], n: int
+) -> tuple[NDArray[Any], NDArray[Any]]:
     """0-based indices from 1-based / negative (relative) ones, and a mask of invalid ones."""
     nv = np.repeat(np.asarray(fnv, dtype=np.int64), sizes)
     # 1-based: i -> i-1; relative: -1 is the last vertex read so far; 0 is invalid.
@@ -236,7 +244,7 @@ def _fan_triangulate(idx: np.ndarray, sizes: np.ndarray) -> np.ndarray:
     return np.stack([idx[s], idx[s + i], idx[s + i + 1]], axis=1)
 
 
-def write_obj(path, V, F) -> None:
+def write_obj(path: str | os.PathLike[str], V: ArrayLike, F: ArrayLike) -> None:
     """Write a Wavefront ``.obj`` surface (``v x y z`` and 1-based ``f`` lines).
 
     Parameters

@@ -2,12 +2,18 @@
 
 from __future__ import annotations
 
+import os
+from typing import cast
+
 import numpy as np
+from numpy.typing import NDArray
 
 from ._text import _Source, _to_float
 
 
-def read_polygon_dat(path):
+def read_polygon_dat(
+    path: str | os.PathLike[str],
+) -> tuple[NDArray[np.float64], list[NDArray[np.float64]]]:
     """Read a poly2tri ``.dat`` polygon: an outer ring, then rings after each ``HOLE`` line.
 
     Each point is a line ``x y``; the last point of a ring is not repeated. Blank lines and
@@ -44,7 +50,7 @@ def read_polygon_dat(path):
         xy = [_to_float(t) for t in s]
         if len(s) != 2 or any(v is None or not np.isfinite(v) for v in xy):
             raise src.error(lineno, f"expected a point 'x y' or 'HOLE', got {raw.strip()!r}")
-        rings[-1].append(xy)
+        rings[-1].append(cast("list[float]", xy))
     for ring, lineno in zip(rings, starts):
         if len(ring) < 3:
             what = "outer ring" if lineno == 1 else "hole"

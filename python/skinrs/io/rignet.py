@@ -2,12 +2,17 @@
 
 from __future__ import annotations
 
+import os
+from collections.abc import Callable
+from typing import Any, cast
+
 import numpy as np
+from numpy.typing import NDArray
 
 from ._text import _Source, _to_float, _to_int
 
 
-def read_rignet_rig(path) -> dict:
+def read_rignet_rig(path: str | os.PathLike[str]) -> dict[str, Any]:
     """Read a RigNet rig (``*_rig.txt``): joints, hierarchy, root and per-vertex skin weights.
 
     Lines: ``joints <name> x y z``, ``root <name>``, ``hier <parent> <child>`` and
@@ -53,7 +58,7 @@ def read_rignet_rig(path) -> dict:
                 raise src.error(lineno, f"joint {s[1]!r} is defined twice")
             index[s[1]] = len(names)
             names.append(s[1])
-            C.append(xyz)
+            C.append(cast("list[float]", xyz))
         elif key == "root":
             if len(s) != 2:
                 raise src.error(lineno, f"expected 'root <name>', got {raw.strip()!r}")
@@ -99,7 +104,12 @@ def read_rignet_rig(path) -> dict:
     return {"names": names, "C": np.array(C, dtype=np.float64), "BE": BE, "root": root, "W": W}
 
 
-def _rignet_skin(src: _Source, skins, joint, n: int) -> np.ndarray:
+def _rignet_skin(
+    src: _Source,
+    skins: list[tuple[int, list[str], int]],
+    joint: Callable[[str, int], int],
+    n: int,
+) -> NDArray[np.float64]:
     nverts = len(skins)  # one line per vertex, ids 0..nverts-1 in any order
     W = np.zeros((nverts, n), dtype=np.float64)
     seen = np.zeros(nverts, dtype=bool)

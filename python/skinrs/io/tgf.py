@@ -2,13 +2,17 @@
 
 from __future__ import annotations
 
+import os
+from typing import Any, cast
+
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .._checks import as_index_array, as_points
 from ._text import _int_rows, _pad_z, _Source, _to_float, _to_int, _write_lines
 
 
-def read_tgf(path, return_point_handles: bool = False):
+def read_tgf(path: str | os.PathLike[str], *, return_point_handles: bool = False) -> Any:
     """Read a libigl ``.tgf`` skeleton: joint positions and directed bone edges.
 
     The file holds joint lines ``index x y z [extra columns]`` (index 1-based, in order), a
@@ -89,7 +93,7 @@ def _tgf_joint(src: _Source, lineno: int, s: list[str], expected_index: int) -> 
     for t, v in zip(s[1:4], xyz):
         if v is None or not np.isfinite(v):
             raise src.error(lineno, f"expected a finite joint coordinate, got {t!r}")
-    return xyz
+    return cast("list[float]", xyz)
 
 
 def _tgf_bone(src: _Source, lineno: int, s: list[str]) -> tuple[int, int, int]:
@@ -102,10 +106,10 @@ def _tgf_bone(src: _Source, lineno: int, s: list[str]) -> tuple[int, int, int]:
     if flags[1] == 1 or flags[2] == 1:
         kind = "pseudo" if flags[1] == 1 else "cage"
         raise src.error(lineno, f"{kind} edges are not supported (only bone edges)")
-    return vals[0], vals[1], lineno
+    return cast(int, vals[0]), cast(int, vals[1]), lineno
 
 
-def write_tgf(path, C, BE) -> None:
+def write_tgf(path: str | os.PathLike[str], C: ArrayLike, BE: ArrayLike) -> None:
     """Write a libigl ``.tgf`` skeleton (1-based indices, 2D joints get ``z = 0``).
 
     Parameters
