@@ -17,7 +17,7 @@ from __future__ import annotations
 import sys
 import time
 import warnings
-from typing import Any
+from typing import TYPE_CHECKING, Any, Literal, TypedDict, overload
 
 import numpy as np
 import scipy.sparse as sp
@@ -25,6 +25,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from . import _checks, _skinrs
 from ._checks import Callback
+
+if TYPE_CHECKING:
+    from typing_extensions import Unpack
 from ._info import Info
 from .operators import biharmonic_matrix
 
@@ -35,6 +38,21 @@ DEFAULT_BC_TOL: float = _skinrs.BOUNDARY_TOL
 #: The solvers of ``bbw_dual_constrained`` and the defaults of its options (from the Rust core).
 SOLVERS: tuple[str, ...] = _skinrs.BBW_SOLVERS
 _DEFAULTS: dict[str, Any] = _skinrs.BBW_DEFAULTS
+
+
+class BbwOptions(TypedDict, total=False):
+    """The keyword options of :func:`bbw_dual_constrained` (for type checkers)."""
+
+    partition_of_unity: bool
+    normalize: bool
+    mass: str
+    solver: str
+    tol: float
+    max_iter: int
+    seed: int
+    lbfgs_memory: int
+    verbose: bool
+    callback: Callback | None
 
 
 def boundary_conditions(
@@ -104,6 +122,36 @@ def biharmonic_energy(W: ArrayLike, B: sp.spmatrix | sp.sparray) -> float:
     return 0.5 * float(np.einsum("ij,ij->", W, B @ W))
 
 
+@overload
+def bbw_dual_constrained(
+    V: ArrayLike,
+    T: ArrayLike,
+    b: ArrayLike,
+    bc: ArrayLike,
+    *,
+    return_info: Literal[False] = False,
+    **options: Unpack[BbwOptions],
+) -> NDArray[np.float64]: ...
+@overload
+def bbw_dual_constrained(
+    V: ArrayLike,
+    T: ArrayLike,
+    b: ArrayLike,
+    bc: ArrayLike,
+    *,
+    return_info: Literal[True],
+    **options: Unpack[BbwOptions],
+) -> tuple[NDArray[np.float64], Info]: ...
+@overload
+def bbw_dual_constrained(
+    V: ArrayLike,
+    T: ArrayLike,
+    b: ArrayLike,
+    bc: ArrayLike,
+    *,
+    return_info: bool,
+    **options: Unpack[BbwOptions],
+) -> NDArray[np.float64] | tuple[NDArray[np.float64], Info]: ...
 def bbw_dual_constrained(
     V: ArrayLike,
     T: ArrayLike,
@@ -267,6 +315,42 @@ def bbw_dual_constrained(
     return (W, info) if return_info else W
 
 
+@overload
+def bbw_dual(
+    V: ArrayLike,
+    T: ArrayLike,
+    C: ArrayLike,
+    BE: ArrayLike | None = None,
+    P: ArrayLike | None = None,
+    *,
+    bc_tol: float = DEFAULT_BC_TOL,
+    return_info: Literal[False] = False,
+    **options: Unpack[BbwOptions],
+) -> NDArray[np.float64]: ...
+@overload
+def bbw_dual(
+    V: ArrayLike,
+    T: ArrayLike,
+    C: ArrayLike,
+    BE: ArrayLike | None = None,
+    P: ArrayLike | None = None,
+    *,
+    bc_tol: float = DEFAULT_BC_TOL,
+    return_info: Literal[True],
+    **options: Unpack[BbwOptions],
+) -> tuple[NDArray[np.float64], Info]: ...
+@overload
+def bbw_dual(
+    V: ArrayLike,
+    T: ArrayLike,
+    C: ArrayLike,
+    BE: ArrayLike | None = None,
+    P: ArrayLike | None = None,
+    *,
+    bc_tol: float = DEFAULT_BC_TOL,
+    return_info: bool,
+    **options: Unpack[BbwOptions],
+) -> NDArray[np.float64] | tuple[NDArray[np.float64], Info]: ...
 def bbw_dual(
     V: ArrayLike,
     T: ArrayLike,

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import sys
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any, Literal, TypedDict, overload
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -28,6 +28,9 @@ from numpy.typing import ArrayLike, NDArray
 from . import _checks, _skinrs
 from ._checks import Callback
 from ._info import Info
+
+if TYPE_CHECKING:
+    from typing_extensions import Unpack
 
 
 def _boundary(V: ArrayLike, F: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
@@ -193,6 +196,33 @@ def knn_distance(X: ArrayLike, *, k: int = 9) -> NDArray[np.float64]:
 
 
 # --- the geometric field (Dodik et al. 2024, Secs. 4-5, App. A) ------------------------------
+
+
+class FieldOptions(TypedDict, total=False):
+    """The keyword options of :func:`bbw_field` besides ``return_info`` (for type checkers)."""
+
+    tets: ArrayLike | None
+    neumann: bool
+    seed: int
+    verbose: bool
+    callback: Callback | None
+    n_points: int | None
+    samples: int | None
+    steps: int | None
+    upsamples: int | None
+    lr: float | None
+    lr_decay: float | None
+    beta1: float | None
+    beta2: float | None
+    adam_eps: float | None
+    h: float | None
+    eps: float | None
+    visibility: bool | None
+    wn_l: float | None
+    wn_h: float | None
+    pool: int | None
+    cache_visibility: bool | None
+    skip_rays: bool | None
 
 
 def default_options(dim: int) -> dict[str, Any]:
@@ -467,6 +497,18 @@ class GeometricField:
             raise ValueError("painted weights must be >= 0 with rows summing to 1")
         self._f.paint(Q, np.ascontiguousarray(W))
 
+    @overload
+    def evaluate(
+        self, Q: ArrayLike, *, return_status: Literal[False] = False
+    ) -> NDArray[np.float64]: ...
+    @overload
+    def evaluate(
+        self, Q: ArrayLike, *, return_status: Literal[True]
+    ) -> tuple[NDArray[np.float64], NDArray[np.uint8]]: ...
+    @overload
+    def evaluate(
+        self, Q: ArrayLike, *, return_status: bool
+    ) -> NDArray[np.float64] | tuple[NDArray[np.float64], NDArray[np.uint8]]: ...
     def evaluate(
         self, Q: ArrayLike, *, return_status: bool = False
     ) -> NDArray[np.float64] | tuple[NDArray[np.float64], NDArray[np.uint8]]:
@@ -487,6 +529,16 @@ class GeometricField:
         W, s = self._f.evaluate(Q)
         return (W, s) if return_status else W
 
+    @overload
+    def vertex_weights(self, *, return_status: Literal[False] = False) -> NDArray[np.float64]: ...
+    @overload
+    def vertex_weights(
+        self, *, return_status: Literal[True]
+    ) -> tuple[NDArray[np.float64], NDArray[np.uint8]]: ...
+    @overload
+    def vertex_weights(
+        self, *, return_status: bool
+    ) -> NDArray[np.float64] | tuple[NDArray[np.float64], NDArray[np.uint8]]: ...
     def vertex_weights(
         self, *, return_status: bool = False
     ) -> NDArray[np.float64] | tuple[NDArray[np.float64], NDArray[np.uint8]]:
@@ -529,6 +581,39 @@ class GeometricField:
         return self._f.energy(f, int(step))
 
 
+@overload
+def bbw_field(
+    V: ArrayLike,
+    F: ArrayLike | None,
+    C: ArrayLike,
+    BE: ArrayLike | None = None,
+    P: ArrayLike | None = None,
+    *,
+    return_info: Literal[False] = False,
+    **options: Unpack[FieldOptions],
+) -> NDArray[np.float64]: ...
+@overload
+def bbw_field(
+    V: ArrayLike,
+    F: ArrayLike | None,
+    C: ArrayLike,
+    BE: ArrayLike | None = None,
+    P: ArrayLike | None = None,
+    *,
+    return_info: Literal[True],
+    **options: Unpack[FieldOptions],
+) -> tuple[NDArray[np.float64], Info]: ...
+@overload
+def bbw_field(
+    V: ArrayLike,
+    F: ArrayLike | None,
+    C: ArrayLike,
+    BE: ArrayLike | None = None,
+    P: ArrayLike | None = None,
+    *,
+    return_info: bool,
+    **options: Unpack[FieldOptions],
+) -> NDArray[np.float64] | tuple[NDArray[np.float64], Info]: ...
 def bbw_field(
     V: ArrayLike,
     F: ArrayLike | None,
@@ -607,7 +692,7 @@ def bbw_field(
         skip_rays=skip_rays,
     )
     fld.optimize(callback=callback)
-    W, _ = fld.vertex_weights(return_status=True)
+    W = fld.vertex_weights()
     if not return_info:
         return W
     info = fld.info()

@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any, Literal, TypedDict, overload
 
 import numpy as np
 import scipy.sparse as sp
@@ -48,6 +48,9 @@ from ._checks import (
     positive_int,
 )
 from ._info import Info
+
+if TYPE_CHECKING:
+    from typing_extensions import Unpack
 from .skinning import forward_kinematics
 
 #: Choice lists and defaults of :func:`reduce_weights` (from the Rust core).
@@ -59,10 +62,30 @@ _DEFAULTS: dict[str, Any] = _skinrs.REDUCE_DEFAULTS
 #: Packed weights ``(indices (n, k) int, weights (n, k) float)``.
 Packed = tuple[NDArray[np.int64], NDArray[np.float64]]
 
+
+class ReduceOptions(TypedDict, total=False):
+    """The keyword options of :func:`reduce_weights` (for type checkers)."""
+
+    method: str
+    V: ArrayLike | None
+    F: ArrayLike | None
+    control_points: ArrayLike | None
+    bone_transforms: ArrayLike | None
+    C: ArrayLike | None
+    nonnegative: bool | None
+    max_sweeps: int
+    tol: float
+    relaxation: float
+    energy: str
+    solver: str
+    callback: Callback | None
+
+
 __all__ = [
     "ENERGIES",
     "METHODS",
     "SOLVERS",
+    "ReduceOptions",
     "ReductionError",
     "deform",
     "random_skeleton_poses",
@@ -166,6 +189,18 @@ def _packed(
     return I, W, m
 
 
+@overload
+def reduce_weights(
+    W: ArrayLike, k: int, *, return_info: Literal[False] = False, **options: Unpack[ReduceOptions]
+) -> Packed: ...
+@overload
+def reduce_weights(
+    W: ArrayLike, k: int, *, return_info: Literal[True], **options: Unpack[ReduceOptions]
+) -> tuple[NDArray[np.int64], NDArray[np.float64], Info]: ...
+@overload
+def reduce_weights(
+    W: ArrayLike, k: int, *, return_info: bool, **options: Unpack[ReduceOptions]
+) -> Packed | tuple[NDArray[np.int64], NDArray[np.float64], Info]: ...
 def reduce_weights(
     W: ArrayLike,
     k: int,
