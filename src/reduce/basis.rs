@@ -4,7 +4,10 @@
 use ndarray::{Array2, ArrayView2};
 use rayon::prelude::*;
 
-use super::deform::{point, Poses};
+use crate::error::SkinResult;
+use crate::invalid;
+
+use super::deform::{deform, point, Poses};
 
 /// What a vertex's handles do over the example poses (the columns of `B_v`).
 pub(crate) enum Basis {
@@ -180,6 +183,45 @@ impl Basis {
                         .sum();
                 }
             }
+        }
+    }
+}
+
+/// The basis of the pose-matching methods and the full-weight deformation `Xbar (n, q)`.
+pub(super) fn pose_basis(
+    w: ArrayView2<f64>,
+    v: Option<ArrayView2<f64>>,
+    poses: Poses,
+    sets: &Array2<usize>,
+) -> SkinResult<(Basis, Array2<f64>)> {
+    let (n, m) = w.dim();
+    let p = poses.count();
+    match poses {
+        Poses::ControlPoints(c) => {
+            let d = c.shape()[2];
+            // cq row i = c_i over all poses; Xbar = W cq.
+            let mut cq = Array2::<f64>::zeros((m, p * d));
+            for i in 0..m {
+                for j in 0..p {
+                    for a in 0..d {
+                        cq[[i, j * d + a]] = c[[j, i, a]];
+                    }
+                }
+            }
+            let gram = cq.dot(&cq.t());
+            let target = w.dot(&cq);
+            Ok((Basis::Cage { cq, gram }, target))
+        }
+        Poses::Bones(_) => {
+            let v = match v {
+                Some(v) => v,
+                None => return invalid!("bone_transforms need the rest vertices V"),
+            };
+            let x = deform(v, &crate::skin::Weights::Dense(w), &poses)?;
+            let d = v.ncols();
+            // (p, n, d) -> (n, p * d)
+            let target = Array2::from_shape_fn((n, p * d), |(vi, c)| x[[c / d, vi, c % d]]);
+            Ok((Basis::bones(&poses, v, sets), target))
         }
     }
 }

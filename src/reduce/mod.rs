@@ -17,23 +17,26 @@ mod cg;
 mod coarse;
 mod coupling;
 mod deform;
+mod input;
 mod iteration;
 mod local;
 mod problem;
 pub(crate) mod qp;
 mod solver;
 
-use ndarray::{Array2, ArrayView2, Axis, CowArray, Ix2};
-use rayon::prelude::*;
+use ndarray::{Array2, ArrayView2, Axis};
 
 use crate::error::SkinResult;
 use crate::invalid;
 use crate::operators::{self, MassKind};
 use crate::progress::Progress;
 
-use basis::Basis;
+use basis::{pose_basis, Basis};
 use coupling::Coupling;
 pub use deform::{deform, deformation_errors, transform_normals, DeformationErrors, Poses};
+use input::{
+    check_inputs, check_linear_precision, check_surface, check_weights, influence_sets, need,
+};
 use iteration::SolveOptions;
 use problem::{LinearPrecision, Problem};
 pub use solver::Solver;
@@ -139,142 +142,6 @@ pub struct Reduction {
     pub qp_capped: usize,
 }
 
-/// Tolerance on `|sum_i W_vi - 1|` for the methods that need partition of unity.
-const POU_TOL: f64 = 1e-6;
-
-/// Influence sets: the `k` largest weights of every row (ties to the lower index), in decreasing
-/// order, and those weights renormalised to sum to one (the k-largest reduction). One pass per
-/// row keeping the best `k` in a sorted buffer: most entries are rejected by one comparison
-/// with the current k-th largest.
-fn influence_sets(w: ArrayView2<f64>, k: usize) -> SkinResult<(Array2<usize>, Array2<f64>)> {
-    let (n, m) = w.dim();
-    let ws = crate::skin::standard2(w);
-    let ws = ws.as_slice().expect("standard layout");
-    let mut sets = Array2::<usize>::zeros((n, k));
-    let mut alpha = Array2::<f64>::zeros((n, k));
-    let bad = sets
-        .as_slice_mut()
-        .expect("fresh array is contiguous")
-        .par_chunks_mut(k)
-        .zip(
-            alpha
-                .as_slice_mut()
-                .expect("fresh array is contiguous")
-                .par_chunks_mut(k),
-        )
-        .enumerate()
-        .find_map_first(|(v, (idx, val))| {
-            let row = &ws[v * m..(v + 1) * m];
-            if !row.iter().fold(true, |ok, x| ok & x.is_finite()) {
-                return Some((v, f64::NAN));
-            }
-            // Insert `x` (handle `i`) into the sorted best `len` (shifting out the last when full);
-            // equal values stay behind the earlier, lower index.
-            let insert = |val: &mut [f64], idx: &mut [usize], len: usize, x: f64, i: usize| {
-                let mut p = len.min(k - 1);
-                while p > 0 && val[p - 1] < x {
-                    val[p] = val[p - 1];
-                    idx[p] = idx[p - 1];
-                    p -= 1;
-                }
-                val[p] = x;
-                idx[p] = i;
-            };
-            for (i, &x) in row[..k].iter().enumerate() {
-                insert(val, idx, i, x, i);
-            }
-            let mut threshold = val[k - 1];
-            for (i, &x) in row.iter().enumerate().skip(k) {
-                if x > threshold {
-                    insert(val, idx, k, x, i);
-                    threshold = val[k - 1];
-                }
-            }
-            let s: f64 = val.iter().sum();
-            if s.is_nan() || s <= 0.0 {
-                return Some((v, s));
-            }
-            val.iter_mut().for_each(|x| *x /= s);
-            None
-        });
-    match bad {
-        Some((v, s)) if s.is_nan() => invalid!("W has a NaN or infinite entry (row {v})"),
-        Some((v, s)) => {
-            invalid!("the k largest weights of W row {v} sum to {s}: cannot renormalise")
-        }
-        None => Ok((sets, alpha)),
-    }
-}
-
-/// Checks `W (n, m)` and `k`.
-fn check_weights(w: ArrayView2<f64>, k: usize, method: Method) -> SkinResult<()> {
-    let (n, m) = w.dim();
-    if n == 0 || m == 0 {
-        return invalid!("W must have at least one row and one column, got shape ({n}, {m})");
-    }
-    if k < 1 || k > m {
-        return invalid!("k must be between 1 and the number of handles m = {m}, got {k}");
-    }
-    if method == Method::KLargest {
-        return Ok(()); // `influence_sets` rejects non-finite entries in its single pass
-    }
-    let ws = crate::skin::standard2(w);
-    let ws = ws.as_slice().expect("standard layout");
-    let bad = ws.par_chunks(m).enumerate().find_map_first(|(v, r)| {
-        let s: f64 = r.iter().sum();
-        (!s.is_finite() || (s - 1.0).abs() > POU_TOL).then_some((v, s))
-    });
-    match bad {
-        Some((v, _)) if ws[v * m..(v + 1) * m].iter().any(|x| !x.is_finite()) => {
-            invalid!("W has a NaN or infinite entry (row {v})")
-        }
-        Some((v, s)) => invalid!(
-            "W row {v} sums to {s}, not 1 (tolerance {POU_TOL}); {method:?} reduction needs \
-             partition-of-unity weights: normalise the rows first"
-        ),
-        None => Ok(()),
-    }
-}
-
-/// What the Laplacian methods need of `F (t, 3)` beyond [`operators::check_elements`]:
-/// triangles, no repeated vertex in a triangle, every vertex used by some triangle (a vertex
-/// off the surface would have an empty Laplacian row and an undetermined weight).
-fn check_surface(n: usize, f: ArrayView2<usize>) -> SkinResult<()> {
-    if f.ncols() != 3 || f.nrows() == 0 {
-        return invalid!(
-            "F must hold at least one triangle (t, 3), got shape {:?}",
-            f.dim()
-        );
-    }
-    let mut used = vec![false; n];
-    for (t, tri) in f.rows().into_iter().enumerate() {
-        let (i, j, k) = (tri[0], tri[1], tri[2]);
-        if i >= n || j >= n || k >= n {
-            return invalid!("F row {t} holds an index outside 0..{n}");
-        }
-        if i == j || j == k || i == k {
-            return invalid!("F row {t} repeats a vertex: [{i}, {j}, {k}]");
-        }
-        used[i] = true;
-        used[j] = true;
-        used[k] = true;
-    }
-    if let Some(u) = used.iter().position(|&x| !x) {
-        return invalid!(
-            "V row {u} is not used by any triangle of F; the Laplacian-based methods need every \
-             vertex on the surface (drop unreferenced vertices and reindex F)"
-        );
-    }
-    Ok(())
-}
-
-fn need<T>(x: Option<T>, what: &str, method: Method) -> SkinResult<T> {
-    match x {
-        Some(x) => Ok(x),
-        None => invalid!("{method:?} reduction needs {what}"),
-    }
-}
-
 /// Reduces weights to `k` influences per vertex (paper 002).
 ///
 /// Inputs:
@@ -304,158 +171,18 @@ pub fn reduce_weights<'a>(
 ) -> SkinResult<Reduction> {
     check_weights(w, k, method)?;
     let (n, m) = w.dim();
-    if let Some(v) = v {
-        if v.nrows() != n {
-            return invalid!("V must have one row per row of W ({n}), got {}", v.nrows());
-        }
-        if !(2..=3).contains(&v.ncols()) {
-            return invalid!("V must have 2 or 3 columns, got {}", v.ncols());
-        }
-        if v.iter().any(|x| !x.is_finite()) {
-            return invalid!("V has a NaN or infinite entry");
-        }
-    }
-    if let Some(p) = poses {
-        let d = match (p, v) {
-            (_, Some(v)) => v.ncols(),
-            (Poses::ControlPoints(c), None) => c.shape()[2],
-            (Poses::Bones(_), None) => return invalid!("bone_transforms need the rest vertices V"),
-        };
-        p.check(m, d)?;
-    }
-    if !(opts.relaxation > 0.0 && opts.relaxation < 2.0) {
-        return invalid!("relaxation must lie in (0, 2), got {}", opts.relaxation);
-    }
-    if opts.tol.is_nan() || opts.tol < 0.0 {
-        return invalid!("tol must be >= 0, got {}", opts.tol);
-    }
-    if opts.rest_control_points.is_some() && method != Method::Smooth {
-        return invalid!(
-            "the rest control points C (linear precision) are used by the smooth method only"
-        );
-    }
-
+    check_inputs((n, m), method, v, poses, opts)?;
     let (sets, mut alpha) = influence_sets(w, k)?;
     if method == Method::KLargest {
-        if opts.nonnegative {
-            if let Some(i) = alpha.iter().position(|&a| a < 0.0) {
-                return invalid!(
-                    "k-largest keeps a negative weight in row {}; it cannot enforce \
-                     nonnegative=True (use another method, or make W non-negative first)",
-                    i / k
-                );
-            }
-        }
-        return Ok(Reduction {
-            indices: sets,
-            weights: alpha,
-            objective: Vec::new(),
-            converged: true,
-            colours: 0,
-            qp_capped: 0,
-        });
+        return k_largest(sets, alpha, opts.nonnegative);
     }
-
     if let Some(c) = opts.rest_control_points {
-        let v = need(v, "the rest vertices V for linear precision", method)?;
-        let d = v.ncols();
-        if c.dim() != (m, d) {
-            return invalid!("C must have shape ({m}, {d}), got {:?}", c.dim());
-        }
-        if c.iter().any(|x| !x.is_finite()) {
-            return invalid!("C has a NaN or infinite entry");
-        }
-        if k < d + 1 {
-            return invalid!("linear precision in {d}D needs k >= {}, got k = {k}", d + 1);
-        }
+        check_linear_precision(c, v, (m, k), method)?;
     }
-    let coupling = match method {
-        Method::Geometric => Coupling::identity(n),
-        _ => {
-            let v = need(v, "the rest vertices V", method)?;
-            let f = need(f, "the triangles F", method)?;
-            check_surface(v.nrows(), f)?;
-            let l = operators::cotan_laplacian(v, f)?;
-            match opts.energy {
-                Energy::Gradient => Coupling::dirichlet(&l),
-                Energy::SquaredLaplacian => {
-                    let mass = operators::massmatrix(v, f, MassKind::Barycentric)?;
-                    Coupling::squared_laplacian(&l, &mass)
-                }
-            }
-        }
-    };
-    // The local iteration renumbers the vertices colour class by colour class (see `solver`);
-    // conjugate gradients keep the input order (better locality) and one class.
-    let use_cg = opts.solver != Solver::Local
-        && !opts.nonnegative
-        && method != Method::Geometric
-        && (method != Method::Smooth || k < u8::MAX as usize)
-        && (opts.solver == Solver::Cg || n.saturating_mul(k * k) <= blocks::FAST_LIMIT);
-    if opts.solver == Solver::Cg && !use_cg {
-        return invalid!(
-            "solver='cg' needs nonnegative=False and a coupled method (smooth or poisson); \
-             use solver='local' or 'auto'"
-        );
-    }
-    // Conjugate gradients and decoupled vertices (geometric) need no colouring: input order.
-    let in_order = use_cg || method == Method::Geometric;
-    let (order, classes) = if in_order {
-        ((0..n).collect(), vec![0, n])
-    } else {
-        coupling.colour_order()
-    };
-    let (coupling, sets_p, mut alpha_p, v_p) = if in_order {
-        (
-            coupling,
-            sets.clone(),
-            alpha.clone(),
-            v.map(|v| v.to_owned()),
-        )
-    } else {
-        let rows = |a: ArrayView2<f64>| a.select(Axis(0), &order);
-        (
-            coupling.permuted(&order),
-            sets.select(Axis(0), &order),
-            alpha.select(Axis(0), &order),
-            v.map(rows),
-        )
-    };
-    let w_p = |w: ArrayView2<'a, f64>| -> CowArray<'a, f64, Ix2> {
-        if in_order {
-            CowArray::from(w)
-        } else {
-            CowArray::from(w.select(Axis(0), &order))
-        }
-    };
-    let (basis, target) = match method {
-        Method::Smooth => (
-            Basis::Select { m },
-            w_p(w).as_standard_layout().into_owned(),
-        ),
-        _ => {
-            let p = *need(
-                poses,
-                "example poses (control_points or bone_transforms)",
-                method,
-            )?;
-            pose_basis(w_p(w).view(), v_p.as_ref().map(|v| v.view()), p, &sets_p)?
-        }
-    };
-    let lp = match (opts.rest_control_points, v_p) {
-        (Some(c), Some(v)) => Some(LinearPrecision { rest_points: c, v }),
-        _ => None,
-    };
-    let problem = Problem {
-        sets: sets_p,
-        basis,
-        coupling,
-        target,
-        lp,
-        nonneg: opts.nonnegative,
-        classes,
-        order,
-    };
+    let coupling = coupling_of(method, n, v, f, opts.energy)?;
+    let use_cg = uses_cg(method, opts, n, k)?;
+    let problem = problem_of(method, w, v, poses, opts, coupling, &sets, use_cg)?;
+    let mut alpha_p = alpha.select(Axis(0), &problem.order);
     problem.make_feasible(&mut alpha_p)?;
     let report = problem.solve(
         &mut alpha_p,
@@ -480,41 +207,121 @@ pub fn reduce_weights<'a>(
     })
 }
 
-/// The basis of the pose-matching methods and the full-weight deformation `Xbar (n, q)`.
-fn pose_basis(
-    w: ArrayView2<f64>,
-    v: Option<ArrayView2<f64>>,
-    poses: Poses,
-    sets: &Array2<usize>,
-) -> SkinResult<(Basis, Array2<f64>)> {
-    let (n, m) = w.dim();
-    let p = poses.count();
-    match poses {
-        Poses::ControlPoints(c) => {
-            let d = c.shape()[2];
-            // cq row i = c_i over all poses; Xbar = W cq.
-            let mut cq = Array2::<f64>::zeros((m, p * d));
-            for i in 0..m {
-                for j in 0..p {
-                    for a in 0..d {
-                        cq[[i, j * d + a]] = c[[j, i, a]];
-                    }
-                }
-            }
-            let gram = cq.dot(&cq.t());
-            let target = w.dot(&cq);
-            Ok((Basis::Cage { cq, gram }, target))
-        }
-        Poses::Bones(_) => {
-            let v = match v {
-                Some(v) => v,
-                None => return invalid!("bone_transforms need the rest vertices V"),
-            };
-            let x = deform(v, &crate::skin::Weights::Dense(w), &poses)?;
-            let d = v.ncols();
-            // (p, n, d) -> (n, p * d)
-            let target = Array2::from_shape_fn((n, p * d), |(vi, c)| x[[c / d, vi, c % d]]);
-            Ok((Basis::bones(&poses, v, sets), target))
+/// The k-largest reduction: the influence sets and their renormalised weights.
+fn k_largest(sets: Array2<usize>, alpha: Array2<f64>, nonnegative: bool) -> SkinResult<Reduction> {
+    if nonnegative {
+        if let Some(i) = alpha.iter().position(|&a| a < 0.0) {
+            return invalid!(
+                "k-largest keeps a negative weight in row {}; it cannot enforce \
+                 nonnegative=True (use another method, or make W non-negative first)",
+                i / sets.ncols()
+            );
         }
     }
+    Ok(Reduction {
+        indices: sets,
+        weights: alpha,
+        objective: Vec::new(),
+        converged: true,
+        colours: 0,
+        qp_capped: 0,
+    })
+}
+
+/// `Q` of the method: the identity (geometric), `-L` or `L M^-1 L` on the surface.
+fn coupling_of(
+    method: Method,
+    n: usize,
+    v: Option<ArrayView2<f64>>,
+    f: Option<ArrayView2<usize>>,
+    energy: Energy,
+) -> SkinResult<Coupling> {
+    if method == Method::Geometric {
+        return Ok(Coupling::identity(n));
+    }
+    let v = need(v, "the rest vertices V", method)?;
+    let f = need(f, "the triangles F", method)?;
+    check_surface(v.nrows(), f)?;
+    let l = operators::cotan_laplacian(v, f)?;
+    Ok(match energy {
+        Energy::Gradient => Coupling::dirichlet(&l),
+        Energy::SquaredLaplacian => {
+            let mass = operators::massmatrix(v, f, MassKind::Barycentric)?;
+            Coupling::squared_laplacian(&l, &mass)
+        }
+    })
+}
+
+/// Whether conjugate gradients minimise (no bounds, a coupled method, blocks that fit in
+/// memory) instead of the local iteration; an error if `solver='cg'` cannot.
+fn uses_cg(method: Method, opts: &ReduceOptions, n: usize, k: usize) -> SkinResult<bool> {
+    let use_cg = opts.solver != Solver::Local
+        && !opts.nonnegative
+        && method != Method::Geometric
+        && (method != Method::Smooth || k < u8::MAX as usize)
+        && (opts.solver == Solver::Cg || n.saturating_mul(k * k) <= blocks::FAST_LIMIT);
+    if opts.solver == Solver::Cg && !use_cg {
+        return invalid!(
+            "solver='cg' needs nonnegative=False and a coupled method (smooth or poisson); \
+             use solver='local' or 'auto'"
+        );
+    }
+    Ok(use_cg)
+}
+
+/// The problem in the iteration's vertex order. The local iteration renumbers the vertices
+/// colour class by colour class (see `solver`); conjugate gradients and decoupled vertices
+/// (geometric) keep the input order (better locality) and one class.
+#[allow(clippy::too_many_arguments)]
+fn problem_of<'a>(
+    method: Method,
+    w: ArrayView2<'a, f64>,
+    v: Option<ArrayView2<'a, f64>>,
+    poses: Option<&Poses<'a>>,
+    opts: &ReduceOptions<'a>,
+    coupling: Coupling,
+    sets: &Array2<usize>,
+    use_cg: bool,
+) -> SkinResult<Problem<'a>> {
+    let n = w.nrows();
+    let in_order = use_cg || method == Method::Geometric;
+    let (order, classes) = if in_order {
+        ((0..n).collect(), vec![0, n])
+    } else {
+        coupling.colour_order()
+    };
+    let rows_f = |a: ArrayView2<f64>| a.select(Axis(0), &order);
+    let coupling = if in_order {
+        coupling
+    } else {
+        coupling.permuted(&order)
+    };
+    let sets_p = sets.select(Axis(0), &order);
+    let v_p = v.map(rows_f);
+    let w_p = rows_f(w);
+    let (basis, target) = match method {
+        Method::Smooth => (Basis::Select { m: w.ncols() }, w_p),
+        _ => {
+            let p = *need(
+                poses,
+                "example poses (control_points or bone_transforms)",
+                method,
+            )?;
+            pose_basis(w_p.view(), v_p.as_ref().map(|v| v.view()), p, &sets_p)?
+        }
+    };
+    let lp = match (opts.rest_control_points, v_p) {
+        (Some(c), Some(v)) => Some(LinearPrecision { rest_points: c, v }),
+        _ => None,
+    };
+    Ok(Problem {
+        sets: sets_p,
+        basis,
+        coupling,
+        target,
+        lp,
+        nonneg: opts.nonnegative,
+        classes,
+        order,
+    })
 }
