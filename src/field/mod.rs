@@ -18,6 +18,7 @@
 //! All batch queries run in parallel with rayon and return results in query order.
 
 pub mod adam;
+pub mod boundary;
 pub mod bvh;
 pub mod energy;
 pub mod evaluate;
@@ -25,10 +26,12 @@ pub mod grid;
 pub mod kernel;
 pub mod mollifier;
 pub mod optimize;
+pub mod primitives;
 pub mod sampling;
 pub mod winding;
 
-pub use bvh::{Aabb, Boundary, BoundaryQueries, Bvh, Closest};
+pub use boundary::{Boundary, BoundaryQueries, Closest};
+pub use bvh::{Aabb, Bvh};
 pub use grid::{knn_distance, HashGrid};
 pub use optimize::{FieldOptions, GeometricField};
 pub use winding::{winding_number_2d, FastWinding};

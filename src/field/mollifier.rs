@@ -8,7 +8,7 @@
 //! and the weights are `alpha = e~ + (1 - sum e~) alpha_hat` (eq. 7). For one-hot targets this
 //! is exactly eq. 15; on a handle `e~` is its one-hot row, so the Lagrange property holds.
 
-use super::bvh::closest_on_segment;
+use super::primitives::closest_on_segment;
 use super::sampling::dist2;
 use super::HashGrid;
 use crate::error::SkinResult;

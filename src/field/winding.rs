@@ -32,7 +32,8 @@
 use ndarray::ArrayView2;
 use rayon::prelude::*;
 
-use super::bvh::{check_queries, Aabb, Boundary};
+use super::boundary::{check_queries, Boundary};
+use super::bvh::Aabb;
 use super::{add, cross, cross2, dot, norm2, par_map_coherent, row, scale, sub, P2, P3};
 use crate::error::SkinResult;
 use crate::invalid;
