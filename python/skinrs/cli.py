@@ -1,4 +1,4 @@
-"""The ``skinrs`` command line (also ``python -m skinrs``): weights, reduce, pose, info.
+"""The ``skinrs`` command line (also ``python -m skinrs``): weights, batch, reduce, pose, info.
 
 Every command takes ``--help``. Bad files and arguments give one line on stderr and exit code
 2 (``--debug`` shows the traceback); Ctrl-C exits with 130. Output files are written to a
@@ -190,6 +190,16 @@ def say(args, msg: str) -> None:
 
 
 def cmd_weights(args) -> None:
+    job = weights_job(args)
+    W = job["W"]
+    say(args, f"weights: {W.shape[0]} vertices x {W.shape[1]} handles, {job['seconds']:.1f} s")
+    say(args, f"wrote {args.output}")
+
+
+def weights_job(args) -> dict:
+    """All of ``skinrs weights`` but the messages (``skinrs batch`` runs it per asset): reads,
+    solves, writes ``args.output`` atomically; returns ``mesh``, ``W``, ``C``, ``BE``, ``P``,
+    ``seconds`` (the solve), ``gap`` and ``energy`` (None where the method reports none)."""
     out_ext = _ext(args.output)
     if out_ext not in (".glb", ".gltf") + WEIGHT_EXTS:
         raise UsageError(f"{args.output}: unknown output format {out_ext!r}")
@@ -206,17 +216,16 @@ def cmd_weights(args) -> None:
     if mesh["F"] is None and args.method == "bbw":
         raise UsageError(f"{args.mesh}: a point cloud has no faces; use --method field")
     t0 = time.perf_counter()
-    W = _solve_weights(args, mesh, C, BE, P)
-    say(
-        args,
-        f"weights: {W.shape[0]} vertices x {W.shape[1]} handles, {time.perf_counter() - t0:.1f} s",
-    )
+    info = {"gap": None, "energy": None}
+    W = _solve_weights(args, mesh, C, BE, P, info)
+    seconds = time.perf_counter() - t0
     _write_weights_output(args, mesh, W, C, BE, P)
-    say(args, f"wrote {args.output}")
+    return dict(info, mesh=mesh, W=W, C=C, BE=BE, P=P, seconds=seconds)
 
 
-def _solve_weights(args, mesh, C, BE, P):
-    """BBW (on the tet mesh, or meshing a surface's inside) or a geometric field's weights."""
+def _solve_weights(args, mesh, C, BE, P, info):
+    """BBW (on the tet mesh, or meshing a surface's inside) or a geometric field's weights;
+    ``info`` gets the final relative ``gap`` and ``energy`` of BBW on a given tet mesh."""
     V, F = mesh["V"], mesh["F"]
     if args.method == "field":
         from .field import GeometricField
@@ -235,7 +244,10 @@ def _solve_weights(args, mesh, C, BE, P):
         if mesh["T"] is not None:
             from .bbw import bbw_dual
 
-            return bbw_dual(V, mesh["T"], C, BE=BE, P=P, tol=tol, callback=prog)
+            W, res = bbw_dual(V, mesh["T"], C, BE=BE, P=P, tol=tol, callback=prog,
+                              return_info=True)  # fmt: skip
+            info.update(gap=res["relative_gap"], energy=res["energy"])
+            return W
         from .meshing import skin_weights
 
         say(args, "meshing the inside with the skeleton (TetGen) ...")
@@ -375,6 +387,18 @@ def cmd_pose(args) -> None:
     say(args, f"wrote {args.output}")
 
 
+def cmd_batch(args) -> int:
+    from . import batch
+
+    opts = {k: getattr(args, k) for k in batch.OPTION_DEFAULTS}
+    report = batch.run(args.source, args.outdir, scheduler=args.scheduler, n_workers=args.workers,
+                       memory_limit=args.memory_limit, retries=args.retries, timeout=args.timeout,
+                       retry_failed=args.retry_failed, progress=not args.quiet, **opts)  # fmt: skip
+    print(batch.summary_table(report))
+    print(f"report: {os.path.join(args.outdir, 'report.html')}")
+    return 1 if report["summary"]["failed"] else 0
+
+
 def cmd_info(args) -> None:
     mesh = read_any_mesh(args.file)
     V, F, asset = mesh["V"], mesh["F"], mesh["asset"]
@@ -413,6 +437,20 @@ def cmd_info(args) -> None:
 # parser
 
 
+def _add_weight_options(p) -> None:
+    """The options of ``skinrs weights`` (``skinrs batch`` takes the same)."""
+    p.add_argument("--method", choices=("bbw", "field"), default="bbw",
+                   help="bbw: tet-meshed BBW (default); field: mesh-free geometric field "
+                   "(soups, open meshes, point clouds)")  # fmt: skip
+    p.add_argument("--tol", type=float, default=None, help="relative duality gap (bbw, 1e-6)")
+    p.add_argument("--steps", type=int, help="optimisation steps (field, default 6000)")
+    p.add_argument("-k", "--influences", type=int, choices=(1, 2, 3, 4, 5, 6, 7, 8),
+                   help="influences per vertex (glTF: 4 by default, or 8)")  # fmt: skip
+    p.add_argument("--reduce-method", default="poisson",
+                   choices=("k-largest", "smooth", "geometric", "poisson"),
+                   help="how weights are cut to -k influences (default poisson)")  # fmt: skip
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="skinrs", description=__doc__.split("\n")[0])
     p.add_argument("--debug", action="store_true", help="show tracebacks of errors")
@@ -426,17 +464,31 @@ def build_parser() -> argparse.ArgumentParser:
                    help=".tgf or RigNet .txt; omit for a glTF with a skin")  # fmt: skip
     w.add_argument("-o", "--output", required=True, metavar="OUT",
                    help="output: .glb/.gltf (skinned asset), .dmat, .npz or .csv")  # fmt: skip
-    w.add_argument("--method", choices=("bbw", "field"), default="bbw",
-                   help="bbw: tet-meshed BBW (default); field: mesh-free geometric field "
-                   "(soups, open meshes, point clouds)")  # fmt: skip
-    w.add_argument("--tol", type=float, default=None, help="relative duality gap (bbw, 1e-6)")
-    w.add_argument("--steps", type=int, help="optimisation steps (field, default 6000)")
-    w.add_argument("-k", "--influences", type=int, choices=(1, 2, 3, 4, 5, 6, 7, 8),
-                   help="influences per vertex (glTF: 4 by default, or 8)")  # fmt: skip
-    w.add_argument("--reduce-method", default="poisson",
-                   choices=("k-largest", "smooth", "geometric", "poisson"),
-                   help="how weights are cut to -k influences (default poisson)")  # fmt: skip
+    _add_weight_options(w)
     w.set_defaults(run=cmd_weights)
+
+    b = sub.add_parser("batch", help="weights of many assets on Dask (local or a cluster)",
+                       description="One `skinrs weights` job per asset on Dask distributed; "
+                       "results, records and report.json/report.html in OUTDIR. A rerun skips "
+                       "assets whose record matches (docs/batch.md).")  # fmt: skip
+    b.add_argument("source", metavar="MANIFEST_OR_DIR",
+                   help="directory (mesh + skeleton of one stem, or skinned .glb) or a .csv / "
+                   ".jsonl manifest (mesh, skeleton, name, per-asset options)")  # fmt: skip
+    b.add_argument("-o", "--outdir", required=True, help="directory for results and reports")
+    b.add_argument("--format", default="glb", choices=("glb", "gltf", "dmat", "npz", "csv"),
+                   help="output of each asset (default glb)")  # fmt: skip
+    _add_weight_options(b)
+    b.add_argument("--scheduler", help="tcp://host:port of a Dask scheduler (default: a "
+                   "LocalCluster, one single-threaded worker process per core)")  # fmt: skip
+    b.add_argument("--workers", type=int, help="LocalCluster workers (default: cores)")
+    b.add_argument("--memory-limit", default="auto",
+                   help="LocalCluster memory per worker, e.g. 4GB (default: RAM / workers)")  # fmt: skip
+    b.add_argument("--retries", type=int, default=1,
+                   help="retries of an asset after an error or a dead worker (default 1)")  # fmt: skip
+    b.add_argument("--timeout", type=float, help="seconds per asset (default: none)")
+    b.add_argument("--retry-failed", action="store_true",
+                   help="redo assets that failed in an earlier run (default: skip them)")  # fmt: skip
+    b.set_defaults(run=cmd_batch)
 
     r = sub.add_parser("reduce", help="cut weights to k influences per vertex",
                        description="Poisson-based weight reduction (Landreneau & Schaefer 2010).")  # fmt: skip
@@ -473,7 +525,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        args.run(args)
+        rc = args.run(args)
     except KeyboardInterrupt:
         print("skinrs: interrupted", file=sys.stderr)
         return 130
@@ -488,4 +540,4 @@ def main(argv=None) -> int:
         print(f"skinrs {args.command}: internal error: {type(e).__name__}: {e} (rerun with "
               "--debug for the traceback)", file=sys.stderr)  # fmt: skip
         return 1
-    return 0
+    return rc or 0
