@@ -87,9 +87,7 @@ def check_first_run(report, outdir, references):
                                       references[name])  # fmt: skip
         rec = json.loads((outdir / f"{name}.json").read_text())
         assert rec["options"]["tol"] == 1e-6 and rec["peak_rss_mb"] > 50
-        assert (
-            (rec["gap"] <= 1e-6 and rec["energy"] > 0) if name == "knight" else rec["gap"] is None
-        )
+        assert rec["gap"] <= 1e-6 and rec["energy"] > 0
         assert set(rec["inputs"]) == {"mesh", "skeleton"} and rec["skinrs_version"]
         assert (outdir / rec["thumbnail"]).read_bytes()[:4] == b"\x89PNG"
     assert "worker process died" in recs["poisoned"]["reason"]

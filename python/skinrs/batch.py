@@ -256,6 +256,7 @@ def run_asset(spec, opts, key, outdir, timeout=None, memory_limit="worker") -> d
     W = job["W"]
     rec.update(status="done", seconds=time.time() - rec["started"], solve_seconds=job["seconds"],
                vertices=int(W.shape[0]), handles=int(W.shape[1]), gap=job["gap"],
+               volume_vertices=job.get("volume_vertices"),
                energy=job["energy"], peak_rss_mb=watch.peak / 2**20,
                output_sha256=_sha256(out), thumbnail=_thumbnail(job, outdir, name))  # fmt: skip
     _write_json(rec_path, rec)

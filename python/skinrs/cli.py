@@ -225,7 +225,7 @@ def weights_job(args) -> dict:
 
 def _solve_weights(args, mesh, C, BE, P, info):
     """BBW (on the tet mesh, or meshing a surface's inside) or a geometric field's weights;
-    ``info`` gets the final relative ``gap`` and ``energy`` of BBW on a given tet mesh."""
+    ``info`` gets BBW's final relative ``gap`` and ``energy`` (None for the field)."""
     V, F = mesh["V"], mesh["F"]
     if args.method == "field":
         from .field import GeometricField
@@ -251,7 +251,11 @@ def _solve_weights(args, mesh, C, BE, P, info):
         from .meshing import skin_weights
 
         say(args, "meshing the inside with the skeleton (TetGen) ...")
-        return skin_weights(V, F, C, BE, P, tol=tol, callback=prog)
+        W, res = skin_weights(V, F, C, BE, P, tol=tol, callback=prog, return_info=True)
+        info.update(
+            gap=res["relative_gap"], energy=res["energy"], volume_vertices=res["volume_vertices"]
+        )
+        return W
     finally:
         prog.close()
 
