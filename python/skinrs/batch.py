@@ -403,7 +403,7 @@ def _result(res, spec, key, outdir, submitted) -> dict:
             with open(rec_path) as fh:
                 old = json.load(fh)
             if old.get("started", 0) >= submitted and "timed out" in old.get("reason", ""):
-                reason = old["reason"]
+                return dict(old)  # (the last attempt's record, with its time)
         except (OSError, ValueError):
             pass
     rec = {"name": spec["name"], "mesh": spec["mesh"], "skeleton": spec["skeleton"], **key,
