@@ -3,7 +3,7 @@
 import importlib
 import sys
 
-NAMES = ("bbw", "field", "lbs", "reduce")
+NAMES = ("bbw", "field", "lbs", "reduce", "scale")
 
 
 def main(argv=None) -> int:
