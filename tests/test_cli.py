@@ -169,6 +169,30 @@ def test_weights_of_a_tet_mesh_make_an_asset_of_its_surface(data_dir, tmp_path):
     assert (a["W"][clear].argmax(1) == W[clear].argmax(1)).all()
 
 
+def test_weights_of_a_tet_mesh_reduced_to_k_influences(data_dir, tmp_path):
+    """Poisson reduction works on the boundary triangles; interior rows keep their k largest."""
+    d = data_dir / "decimated-knight"
+    out = tmp_path / "knight.npz"
+    run = skinrs_cli(
+        "weights", d / "decimated-knight.mesh", d / "decimated-knight.tgf", "-k", "2", "-o", out
+    )  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    V, T, F = skinrs.io.read_mesh(d / "decimated-knight.mesh")
+    C, BE = skinrs.io.read_tgf(d / "decimated-knight.tgf")
+    with np.load(out) as z:
+        W2 = z["W"]
+    assert W2.shape == (len(V), 7) and ((W2 > 0).sum(1) <= 2).all()
+    assert np.abs(W2.sum(1) - 1).max() <= 1e-9 and W2.min() >= 0
+    W = skinrs.bbw_dual(V, T, C, BE=BE, tol=1e-6)
+    interior = np.setdiff1d(np.arange(len(V)), F)
+    assert len(interior) == 48
+    top2 = np.argsort(-W[interior], axis=1)[:, :2]
+    kept = np.take_along_axis(W[interior], top2, 1)
+    expected = kept / kept.sum(1, keepdims=True)
+    got = np.take_along_axis(W2[interior], top2, 1)
+    assert np.abs(got - expected).max() <= 1e-4
+
+
 def test_reduce(capsule, tmp_path):
     d, V = capsule
     W = np.random.default_rng(0).random((len(V), 2))

@@ -275,15 +275,31 @@ def _write_weights_output(args, mesh, W, C, BE, P):
             write_gltf(tmp, V, F, W, C, BE, P, k=args.influences or 4,
                        method=args.reduce_method, asset=mesh["asset"])  # fmt: skip
     elif args.influences:
-        from .reduce import reduce_weights
-
-        needs_mesh = args.reduce_method in ("smooth", "poisson")
-        packed = reduce_weights(W, min(args.influences, W.shape[1]), method=args.reduce_method,
-                                V=V, F=F if needs_mesh else None,
-                                bone_transforms=_example_poses(args.reduce_method, C, BE, P))  # fmt: skip
+        packed = _reduce_all_rows(args, mesh, W, C, BE, P)
         write_weights(args.output, io_unpack(packed, W.shape[1]), packed)
     else:
         write_weights(args.output, W)
+
+
+def _reduce_all_rows(args, mesh, W, C, BE, P):
+    """``W`` reduced to ``-k`` influences. On a tet mesh the surface rows get the chosen method
+    (smooth and Poisson work on the boundary triangles) and the interior rows, which no
+    triangle uses, keep their k largest weights."""
+    from .reduce import reduce_weights
+
+    V, F = mesh["V"], mesh["F"]
+    k = min(args.influences, W.shape[1])
+    method = args.reduce_method
+    poses = _example_poses(method, C, BE, P)
+    if mesh["T"] is None or method not in ("smooth", "poisson"):
+        F_used = F if method in ("smooth", "poisson") else None
+        return reduce_weights(W, k, method=method, V=V, F=F_used, bone_transforms=poses)
+    surface = np.unique(F)
+    idx, wts = reduce_weights(W, k, method="k-largest")
+    s_idx, s_wts = reduce_weights(W[surface], k, method=method, V=V[surface],
+                                  F=np.searchsorted(surface, F), bone_transforms=poses)  # fmt: skip
+    idx[surface], wts[surface] = s_idx, s_wts
+    return idx, wts
 
 
 def io_unpack(packed, m):
