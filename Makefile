@@ -11,7 +11,7 @@ export SKINRS_BLENDER_PYTHON := $(abspath $(BLENDER_VENV))/bin/python
 # The dependencies and the `test` extra of pyproject.toml, read from there (one list).
 DEPS = $(shell $(PYTHON) -c "import shlex, tomllib; p = tomllib.load(open('pyproject.toml', 'rb'))['project']; print(' '.join(map(shlex.quote, p['dependencies'] + p['optional-dependencies']['test'])))")
 
-.PHONY: venv build demo test quicktest pytest lint typecheck bench clean
+.PHONY: venv build demo test quicktest pytest lint typecheck bench clean fuzz
 
 $(VENV)/.deps: pyproject.toml Makefile
 	$(PYTHON) -m venv $(VENV)
@@ -55,6 +55,11 @@ lint: venv
 
 typecheck: venv
 	$(PY) -m mypy
+
+# Long property-based robustness run (>= 50,000 cases, 30 s per call); `make test` runs the
+# short profile. Found examples are kept in tests/.hypothesis (committed).
+fuzz: build
+	SKINRS_FUZZ=long SKINRS_FUZZ_TIMEOUT=30 $(PY) -m pytest -q -s -p no:cacheprovider tests/test_fuzz.py
 
 bench: build
 	$(PY) -m skinrs.bench bbw

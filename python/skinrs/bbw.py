@@ -118,8 +118,18 @@ def boundary_conditions(
 
 def biharmonic_energy(W: ArrayLike, B: sp.spmatrix | sp.sparray) -> float:
     """``1/2 tr(W^T B W)``, the BBW objective (paper eq. 3), for ``W (n, m)`` and sparse ``B``."""
-    W = np.asarray(W, dtype=np.float64)
-    return 0.5 * float(np.einsum("ij,ij->", W, B @ W))
+    import scipy.sparse as sp
+
+    if not (sp.issparse(B) or isinstance(B, np.ndarray)) or B.ndim != 2 or B.shape[0] != B.shape[1]:
+        raise ValueError(f"B must be a square (n, n) matrix, got {type(B).__name__} {np.shape(B)}")
+    W = _checks.as_points(W, "W", dims=None, min_rows=0, coordinates=False)
+    if W.shape[0] != B.shape[0]:
+        raise ValueError(f"W must have {B.shape[0]} rows like B, got shape {W.shape}")
+    with np.errstate(over="ignore", invalid="ignore"):
+        e = 0.5 * float(np.einsum("ij,ij->", W, np.asarray(B @ W)))
+    if not np.isfinite(e):
+        raise ValueError("the energy overflows: W or B has entries too large for double precision")
+    return e
 
 
 @overload
@@ -244,10 +254,10 @@ def bbw_dual_constrained(
     b = _checks.as_index_array(b, n, "b", ndim=1, allow_empty=False)
     if len(np.unique(b)) != len(b):
         raise ValueError("b holds a vertex more than once")
-    bc = np.asarray(bc)
+    bc = _checks.as_real_array(bc, "bc")
     if bc.ndim == 1 and len(b) == 1:
         bc = bc.reshape(1, -1)
-    bc = _checks.as_points(bc, "bc", dims=range(1, 1 << 30))
+    bc = _checks.as_points(bc, "bc", dims=None, coordinates=False)
     if bc.shape[0] != len(b):
         raise ValueError(f"bc must have one row per entry of b ({len(b)}), got {bc.shape}")
     if partition_of_unity:
@@ -262,13 +272,13 @@ def bbw_dual_constrained(
             )
     elif bc.min() < 0 or bc.max() > 1:
         raise ValueError("bc must lie in [0, 1] for the box-constrained variant")
-    if solver not in SOLVERS:
+    if not isinstance(solver, str) or solver not in SOLVERS:
         raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
     tol = _checks.positive_float(tol, "tol")
-    max_iter = _checks.positive_int(max_iter, "max_iter")
-    lbfgs_memory = _checks.positive_int(lbfgs_memory, "lbfgs_memory")
-    if callback is not None and not callable(callback):
-        raise ValueError("callback must be callable")
+    max_iter = _checks.positive_int(max_iter, "max_iter", hi=2**63 - 1)
+    lbfgs_memory = _checks.positive_int(lbfgs_memory, "lbfgs_memory", hi=10_000)
+    seed = _checks.integer(seed, "seed", 0, 2**64 - 1)
+    _checks.as_callback(callback)
 
     t0 = time.perf_counter()
     B = biharmonic_matrix(V, T, mass=mass).tocsc()
@@ -389,6 +399,7 @@ def bbw_dual(
     >>> C, BE = skinrs.io.read_tgf("hand.tgf")                            # doctest: +SKIP
     >>> W = skinrs.bbw_dual(V, T, C, BE=BE)                               # doctest: +SKIP
     """
+    bc_tol = _checks.positive_float(bc_tol, "bc_tol")
     b, bc = boundary_conditions(V, C, BE=BE, P=P, tol=bc_tol)
     return bbw_dual_constrained(
         V,

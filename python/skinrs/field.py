@@ -276,6 +276,27 @@ def _handles(
     return C, P, BE
 
 
+def _check_field_memory(d: int, k: int, options: dict[str, Any]) -> None:
+    """ValueError before anything is allocated when the point set, samples or pool of a field
+    would not fit in memory (defaults as in the Rust core)."""
+    three = d == 3
+    points = options.get("n_points", 1 << 13 if three else 1 << 11) << options.get("upsamples", 3)
+    samples = options.get("samples", 1 << 11 if three else 1 << 12)
+    pool = options.get("pool", 1 << 16 if three else 1 << 17)
+    cache = options.get("cache_visibility", True)
+    # per point: position, parameters and two Adam moments per handle, grid entry; per pool
+    # sample: position, winding weight and (cached) up to 64 visible points x 9 neighbours
+    nbytes = (
+        points * (8 * d + 32 * k + 16)
+        + samples * (64 + 8 * k)
+        + pool * (8 * d + 16 + (64 * 9 * 4 if cache else 0))
+    )
+    _checks.fits_in_memory(
+        float(nbytes),
+        f"a field with n_points * 2^upsamples = {points}, samples = {samples}, pool = {pool}",
+    )
+
+
 class GeometricField:
     """Mesh-free bounded biharmonic weights on a geometric field (Dodik et al. 2024).
 
@@ -424,23 +445,20 @@ class GeometricField:
         self._resume = _checks.positive_int(resume_steps, "resume_steps")
         for key in ("n_points", "samples", "steps", "pool"):
             if key in options:
-                options[key] = _checks.positive_int(options[key], key)
+                options[key] = _checks.positive_int(options[key], key, hi=2**62)
         if "upsamples" in options:
-            u = options["upsamples"]
-            if isinstance(u, bool) or not isinstance(u, (int, np.integer)) or u < 0:
-                raise ValueError(f"upsamples must be a non-negative integer, got {u!r}")
-            options["upsamples"] = int(u)
+            options["upsamples"] = _checks.integer(options["upsamples"], "upsamples", 0, 8)
         for key in ("lr", "lr_decay", "h", "eps", "adam_eps"):
             if key in options:
                 options[key] = _checks.positive_float(options[key], key)
         for key in ("beta1", "beta2", "wn_l", "wn_h"):
             if key in options:
-                options[key] = float(options[key])
+                options[key] = _checks.finite_float(options[key], key)
         for key in ("visibility", "cache_visibility", "skip_rays"):
             if key in options:
                 options[key] = bool(options[key])
-        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-            raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+        seed = _checks.integer(seed, "seed", 0, 2**64 - 1)
+        _check_field_memory(d, len(P) + len(BE), options)
         options.update(neumann=bool(neumann), seed=int(seed))
         self.k = len(P) + len(BE)
         self.dim = d
@@ -462,9 +480,7 @@ class GeometricField:
             the field keeps the steps done so far.
         """
         if steps is not None:
-            steps = _checks.positive_int(steps, "steps")
-        if callback is not None and not callable(callback):
-            raise ValueError("callback must be callable")
+            steps = _checks.positive_int(steps, "steps", hi=2**62)
         cb = _checks.progress_printer(self.verbose, callback, _describe)
         self._f.optimize(steps, self._resume, cb)
         if self.verbose:
@@ -487,7 +503,7 @@ class GeometricField:
             point. Points painted again get the new value.
         """
         Q = _checks.as_points(points, "points", dims=(self.dim,))
-        W = np.asarray(weights, dtype=np.float64)
+        W = _checks.as_real_array(weights, "weights")
         if W.ndim == 1:
             W = np.tile(W, (Q.shape[0], 1))
         W = _checks.as_weights(W, Q.shape[0], "weights")
@@ -577,8 +593,9 @@ class GeometricField:
     def energy(self, f: ArrayLike, *, step: int = 0) -> tuple[float, NDArray[np.float64]]:
         """Monte-Carlo energy (eq. 11) and its hand-derived gradient at parameters ``f`` (N, K),
         with the samples of optimisation step ``step`` (for checks)."""
-        f = _checks.as_points(f, "f", dims=(self.k,))
-        return self._f.energy(f, int(step))
+        f = _checks.as_points(f, "f", dims=(self.k,), coordinates=False)
+        step = _checks.integer(step, "step", 0, 2**64 - 1)
+        return self._f.energy(f, step)
 
 
 @overload

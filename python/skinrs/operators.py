@@ -168,16 +168,18 @@ def connected_components(F: ArrayLike, *, n: int | None = None) -> tuple[int, ND
     >>> ops.connected_components(np.array([[0, 1, 2], [3, 4, 5]]), n=7)
     (3, array([0, 0, 0, 1, 1, 1, 2]))
     """
-    A = np.asarray(F)
-    if n is None:
-        if A.size and not (np.issubdtype(A.dtype, np.number) and np.all(np.isfinite(A))):
-            raise ValueError("F must hold integer indices")
-        n = int(A.max()) + 1 if A.size else 0
-    elif isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
-        raise ValueError(f"n must be a non-negative integer, got {n!r}")
-    n = int(n)
+    A = _checks.as_real_array(F, "F")
     if A.ndim == 2 and A.shape[1] == 0:
         raise ValueError(f"F must have at least one column, got shape {A.shape}")
+    if n is None:
+        F = _checks.as_index_array(A, 2**63 - 1, "F")
+        n = int(F.max()) + 1 if F.size else 0
+        what = f"labels for the {n} vertices that F's largest index implies"
+    else:
+        n = _checks.integer(n, "n", 0, 2**63 - 1)
+        what = f"labels for n={n} vertices"
+    # union-find keeps three vertex-sized arrays next to the labels
+    _checks.fits_in_memory(32.0 * n, what)
     F = _checks.as_index_array(A, n, "F")
     count, labels = _skinrs._connected_components(n, F)
     return int(count), labels

@@ -37,7 +37,7 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
-from . import _skinrs
+from . import _checks, _skinrs
 from ._checks import (
     Callback,
     as_elements,
@@ -114,18 +114,6 @@ class ReductionError:
     position_rms_all: float
 
 
-def _float_array(X: ArrayLike, name: str, ndim: int) -> NDArray[np.float64]:
-    try:
-        A = np.asarray(X, dtype=np.float64)
-    except (TypeError, ValueError) as e:
-        raise ValueError(f"{name} must be an array of numbers: {e}") from None
-    if A.ndim != ndim:
-        raise ValueError(f"{name} must be {ndim}-dimensional, got shape {A.shape}")
-    if not np.all(np.isfinite(A)):
-        raise ValueError(f"{name} has a NaN or infinite entry")
-    return np.ascontiguousarray(A)
-
-
 def _poses(
     control_points: ArrayLike | None,
     bone_transforms: ArrayLike | None,
@@ -145,9 +133,9 @@ def _poses(
             raise ValueError("example poses are needed: pass control_points or bone_transforms")
         return None, None, False
     if control_points is not None:
-        P = np.asarray(control_points)
+        P = _checks.as_real_array(control_points, "control_points")
         single = P.ndim == 2
-        P = _float_array(P[None] if single else P, "control_points", 3)
+        P = _checks.as_array(P[None] if single else P, "control_points", 3)
         dd = P.shape[2] if d is None else d
         if P.shape[0] < 1 or P.shape[1:] != (m, dd):
             raise ValueError(
@@ -156,9 +144,9 @@ def _poses(
             )
         return P, None, single
     assert bone_transforms is not None
-    T = np.asarray(bone_transforms)
+    T = _checks.as_real_array(bone_transforms, "bone_transforms")
     single = T.ndim == 3
-    T = _float_array(T[None] if single else T, "bone_transforms", 4)
+    T = _checks.as_array(T[None] if single else T, "bone_transforms", 4)
     dd = 3 if d is None else d
     if T.shape[0] < 1 or T.shape[1:] != (m, dd, dd + 1):
         raise ValueError(
@@ -173,8 +161,8 @@ def _packed(
 ) -> tuple[NDArray[np.int64], NDArray[np.float64], int]:
     """``(indices, weights)`` or a dense ``(n, m)`` matrix -> int64 indices, float weights, m."""
     if isinstance(reduced, tuple) and len(reduced) == 2:
-        Wr = as_points(reduced[1], "weights", dims=range(1, 1 << 30))
-        I = np.asarray(reduced[0])
+        Wr = as_points(reduced[1], "weights", dims=None, coordinates=False)
+        I = _checks.as_real_array(reduced[0], "indices")
         if I.shape != Wr.shape:
             raise ValueError(
                 f"indices and weights must have the same shape, got {I.shape} and {Wr.shape}"
@@ -299,7 +287,7 @@ def reduce_weights(
     ([[0, 1], [1, 2]], [[0.667, 0.333], [0.556, 0.444]])
     """
     t0 = time.perf_counter()
-    if method not in METHODS:
+    if not isinstance(method, str) or method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     W = as_weights(W)
     n, m = W.shape
@@ -324,15 +312,14 @@ def reduce_weights(
         C = as_points(C, "C")
     if nonnegative is None:
         nonnegative = bool(T is not None or W.min() >= 0)
-    max_sweeps = positive_int(max_sweeps, "max_sweeps")
-    tol = float(tol)
-    if not np.isfinite(tol) or tol < 0:
-        raise ValueError(f"tol must be a finite number >= 0, got {tol!r}")
+    max_sweeps = positive_int(max_sweeps, "max_sweeps", hi=2**63 - 1)
+    tol = _checks.non_negative_float(tol, "tol")
     relaxation = positive_float(relaxation, "relaxation")
-    if energy not in ENERGIES:
+    if not isinstance(energy, str) or energy not in ENERGIES:
         raise ValueError(f"energy must be one of {ENERGIES}, got {energy!r}")
-    if solver not in SOLVERS:
+    if not isinstance(solver, str) or solver not in SOLVERS:
         raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
+    callback = _checks.as_callback(callback)
     I, A, obj, converged, colours, capped = _skinrs.reduce_weights(
         W,
         k,
@@ -375,8 +362,12 @@ def unpack_weights(
     [[0.25, 0.0, 0.75]]
     """
     m = positive_int(m, "m")
-    Wr = as_points(weights, "weights", dims=range(1, 1 << 30))
-    I = np.asarray(indices)
+    Wr = as_points(weights, "weights", dims=None, coordinates=False)
+    if not sparse:
+        _checks.fits_in_memory(
+            8.0 * Wr.shape[0] * m, f"a dense ({Wr.shape[0]}, {m}) matrix (m={m})"
+        )
+    I = _checks.as_real_array(indices, "indices")
     if I.shape != Wr.shape:
         raise ValueError(
             f"indices and weights must have the same shape, got {I.shape} and {Wr.shape}"
@@ -425,11 +416,12 @@ def _handle_count(
     X = control_points if control_points is not None else bone_transforms
     if X is None or not packed:
         return m
-    shape = np.shape(X)
+    name = "control_points" if control_points is not None else "bone_transforms"
+    shape = _checks.as_real_array(X, name).shape
     single = len(shape) == (2 if control_points is not None else 3)
     mp = shape[0] if single else (shape[1] if len(shape) > 1 else 0)
     if mp < m:
-        raise ValueError(f"the weights refer to handle {m - 1}, but the poses have {mp} handles")
+        raise ValueError(f"the weights refer to handle {m - 1}, but {name} has {mp} handles")
     return mp
 
 
@@ -568,11 +560,14 @@ def random_skeleton_poses(
     C, BE = _bones(C, BE)
     n_poses = positive_int(n_poses, "n_poses")
     max_angle = positive_float(max_angle, "max_angle")
-    max_twist = max_angle / 3 if max_twist is None else float(max_twist)
-    if not np.isfinite(max_twist) or max_twist < 0:
-        raise ValueError(f"max_twist must be a finite number >= 0, got {max_twist!r}")
+    max_twist = (
+        max_angle / 3 if max_twist is None else _checks.non_negative_float(max_twist, "max_twist")
+    )
+    if not isinstance(seed, np.random.Generator):
+        seed = _checks.seed(seed)
     rng = np.random.default_rng(seed)
     m = BE.shape[0]
+    _checks.fits_in_memory(96.0 * n_poses * m, f"n_poses={n_poses} poses of {m} bones")
     axis = C[BE[:, 1]] - C[BE[:, 0]]
     length = np.linalg.norm(axis, axis=1, keepdims=True)
     if np.any(length == 0):

@@ -13,7 +13,7 @@ from typing import Any, overload
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from . import _skinrs
+from . import _checks, _skinrs
 from ._checks import as_index_array, as_points
 
 #: Skinning weights: dense ``(n, m)``, a packed pair ``(indices (n, k), weights (n, k))`` or a
@@ -35,14 +35,7 @@ def _as_float_view(X: ArrayLike, name: str, ndim: int) -> NDArray[np.float64]:
 
     Finiteness is not checked here (the Rust kernels check their output and name the input).
     """
-    try:
-        A = np.asarray(X)
-    except (TypeError, ValueError) as e:  # ragged lists and the like
-        raise ValueError(f"{name} must be a {ndim}-dimensional array of numbers: {e}") from None
-    if A.dtype == object or not (np.issubdtype(A.dtype, np.number) or A.dtype == bool):
-        raise ValueError(f"{name} must hold numbers, got dtype {A.dtype}")
-    if np.iscomplexobj(A):
-        raise ValueError(f"{name} must be real, got dtype {A.dtype}")
+    A = _checks.as_real_array(X, name)
     if A.ndim != ndim:
         raise ValueError(f"{name} must be {ndim}-dimensional, got shape {A.shape}")
     return np.ascontiguousarray(A, dtype=np.float64)
@@ -50,8 +43,8 @@ def _as_float_view(X: ArrayLike, name: str, ndim: int) -> NDArray[np.float64]:
 
 def _as_index_view(X: ArrayLike, name: str) -> NDArray[np.int64]:
     """C-contiguous int64 ``(n, k)`` index array; range checked by the Rust kernel."""
-    A = np.asarray(X)
-    if A.dtype == bool or not np.issubdtype(A.dtype, np.number) or np.iscomplexobj(A):
+    A = _checks.as_real_array(X, name)
+    if A.dtype == bool:
         raise ValueError(f"{name} must hold integer indices, got dtype {A.dtype}")
     if not np.issubdtype(A.dtype, np.integer) and (
         not np.all(np.isfinite(A)) or np.any(A != np.round(A))
@@ -59,7 +52,19 @@ def _as_index_view(X: ArrayLike, name: str) -> NDArray[np.int64]:
         raise ValueError(f"{name} must hold integer indices, got non-integral values")
     if A.ndim != 2:
         raise ValueError(f"{name} must be 2-dimensional (n, k), got shape {A.shape}")
+    if A.size and (A.max() > np.iinfo(np.int64).max or A.min() < np.iinfo(np.int64).min):
+        raise ValueError(f"{name} holds index {A.max()}, beyond any number of handles")
     return np.ascontiguousarray(A, dtype=np.int64)
+
+
+def _normals(N: ArrayLike | None, V: NDArray[np.float64]) -> NDArray[np.float64] | None:
+    """Rest normals shaped like ``V`` (float64, C-contiguous), or None."""
+    if N is None:
+        return None
+    N = _as_float_view(N, "N", 2)
+    if N.shape != V.shape:
+        raise ValueError(f"N must have shape {V.shape} like V, got {N.shape}")
+    return N
 
 
 def _split_weights(W: Weights) -> tuple[NDArray[np.float64], NDArray[np.int64] | None]:
@@ -197,7 +202,7 @@ def lbs(
     d = V.shape[1]
     T = _transforms(T, d)
     Wv, I = _split_weights(W)
-    Nv = None if N is None else _as_float_view(N, "N", 2)
+    Nv = _normals(N, V)
     out = _check_out(out, V.shape)
     U, NU = _skinrs.lbs(V, Wv, T, index=I, N=Nv, out=out)
     return U if NU is None else (U, NU)
@@ -268,14 +273,15 @@ def dqs(
         T3[:, :2, 3] = T2[:, :, 2]
         T3[:, 2, 2] = 1.0
         V3 = np.hstack([V, np.zeros((V.shape[0], 1))])
-        N3 = None if N is None else np.hstack([_as_float_view(N, "N", 2), np.zeros((len(V), 1))])
+        N2 = _normals(N, V)
+        N3 = None if N2 is None else np.hstack([N2, np.zeros((len(V), 1))])
         U3, NU = _skinrs.dqs(V3, Wv, T3, index=I, N=N3)
         if out is None:
             out = np.empty(V.shape)
         out[:] = U3[:, :2]
         return out if NU is None else (out, np.ascontiguousarray(NU[:, :2]))
     T = _transforms(T, 3)
-    Nv = None if N is None else _as_float_view(N, "N", 2)
+    Nv = _normals(N, V)
     U, NU = _skinrs.dqs(V, Wv, T, index=I, N=Nv, out=out)
     return U if NU is None else (U, NU)
 
@@ -292,11 +298,12 @@ def bone_parents(BE: ArrayLike, *, n_joints: int | None = None) -> NDArray[np.in
     >>> skinrs.bone_parents(np.array([[0, 1], [1, 2], [1, 3]]))
     array([-1,  0,  0])
     """
-    B = np.asarray(BE)
     if n_joints is None:
+        B = as_index_array(BE, 2**63 - 1, "BE", cols=2)
         n_joints = int(B.max()) + 1 if B.size else 0
+    n_joints = _checks.integer(n_joints, "n_joints", 0, 2**63 - 1)
     BE = as_index_array(BE, n_joints, "BE", cols=2)
-    return _skinrs.bone_parents(BE, int(n_joints))
+    return _skinrs.bone_parents(BE, n_joints)
 
 
 def forward_kinematics(C: ArrayLike, BE: ArrayLike, Q: ArrayLike) -> NDArray[np.float64]:
@@ -403,7 +410,7 @@ def quaternions_from_xyzw(Q: ArrayLike) -> NDArray[np.float64]:
     >>> skinrs.quaternions_from_xyzw([0.0, 0.0, 0.0, 1.0])
     array([[1., 0., 0., 0.]])
     """
-    A = np.asarray(Q, dtype=np.float64)
+    A = _checks.as_real_array(Q, "Q").astype(np.float64)
     if A.ndim == 2 and A.shape[1] == 4:
         X = A
     elif A.ndim == 1 or (A.ndim == 2 and A.shape[1] == 1):

@@ -46,6 +46,25 @@ pub fn segment_segment(p: &P2, d: &P2, a: &P2, b: &P2) -> bool {
 /// Voronoi regions of the vertices, edges and face are tested in turn, no square roots, and
 /// degenerate triangles fall through to an edge or vertex.
 pub fn closest_on_triangle(x: &P3, a: &P3, b: &P3, c: &P3) -> P3 {
+    let p = closest_on_triangle_regions(x, a, b, c);
+    if p.iter().all(|v| v.is_finite()) {
+        return p;
+    }
+    // A degenerate triangle (two equal corners) can make a region's ratio 0 / 0.
+    closest_on_edges(x, a, b, c)
+}
+
+/// The closest of the three edges' closest points (for degenerate triangles).
+fn closest_on_edges(x: &P3, a: &P3, b: &P3, c: &P3) -> P3 {
+    [(a, b), (b, c), (c, a)]
+        .iter()
+        .map(|(s, t)| closest_on_segment(x, s, t))
+        .min_by(|p, q| norm2(&sub(x, p)).total_cmp(&norm2(&sub(x, q))))
+        .unwrap_or(*a)
+}
+
+/// Ericson's region test for [`closest_on_triangle`].
+fn closest_on_triangle_regions(x: &P3, a: &P3, b: &P3, c: &P3) -> P3 {
     let ab = sub(b, a);
     let ac = sub(c, a);
     let ap = sub(x, a);
@@ -84,11 +103,7 @@ pub fn closest_on_triangle(x: &P3, a: &P3, b: &P3, c: &P3) -> P3 {
     let den = va + vb + vc;
     if den == 0.0 || !den.is_finite() {
         // Degenerate (collinear) triangle that slipped through: best of the three edges.
-        return [(a, b), (b, c), (c, a)]
-            .iter()
-            .map(|(s, t)| closest_on_segment(x, s, t))
-            .min_by(|p, q| norm2(&sub(x, p)).total_cmp(&norm2(&sub(x, q))))
-            .unwrap_or(*a);
+        return closest_on_edges(x, a, b, c);
     }
     let v = vb / den;
     let w = vc / den;

@@ -207,6 +207,12 @@ impl Progress for PyProgress {
     }
 }
 
+/// Panics inside [`released`] (for the tests: a panic must become `InternalError`).
+#[pyfunction]
+fn _panic_for_tests(py: Python<'_>, message: String) -> PyResult<()> {
+    released(py, || -> SkinResult<()> { panic!("{message}") })
+}
+
 #[pymodule]
 fn _skinrs(m: &Bound<'_, PyModule>) -> PyResult<()> {
     // Sparse factorisations run single-threaded (faster on small machines, see
@@ -214,6 +220,7 @@ fn _skinrs(m: &Bound<'_, PyModule>) -> PyResult<()> {
     faer::set_global_parallelism(faer::Par::Seq);
     m.add("InternalError", m.py().get_type::<InternalError>())?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add_function(wrap_pyfunction!(_panic_for_tests, m)?)?;
     operators::register(m)?;
     bbw::register(m)?;
     skin::register(m)?;

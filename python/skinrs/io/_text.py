@@ -25,6 +25,11 @@ class _Source:
     def lines(self) -> list[str]:
         return self.text.splitlines()
 
+    @property
+    def last_line_unterminated(self) -> bool:
+        """Whether the last line has no newline (a file cut in the middle of a line)."""
+        return bool(self.text.strip()) and not self.text.endswith(("\n", "\r"))
+
     def error(self, lineno: int, what: str) -> ValueError:
         return ValueError(f"{self.name}: line {lineno}: {what}")
 

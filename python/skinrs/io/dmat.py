@@ -70,6 +70,13 @@ def _dmat_binary(name: str, payload: bytes, rows: int, cols: int) -> np.ndarray:
             f"{rows}x{cols} float64 values, found {len(payload)}"
         )
     flat = np.frombuffer(payload, dtype="<f8")
+    bad = np.flatnonzero(~np.isfinite(flat))
+    if bad.size:
+        k = int(bad[0])
+        raise ValueError(
+            f"{name}: line 3 (binary data): value {k} (row {k % rows}, column {k // rows}) is "
+            f"{flat[k]!r}: NaN and infinite entries are not accepted"
+        )
     return np.ascontiguousarray(flat.reshape(cols, rows).T, dtype=np.float64)
 
 
@@ -94,6 +101,14 @@ def _dmat_ascii(name: str, text: str, rows: int, cols: int) -> np.ndarray:
         k = _first_bad(toks, np.float64)
         lineno = _line_of_token(text.splitlines(), k) + 1
         raise ValueError(f"{name}: line {lineno}: expected a number, got {toks[k]!r}")
+    bad = np.flatnonzero(~np.isfinite(flat))
+    if bad.size:
+        k = int(bad[0])
+        lineno = _line_of_token(text.splitlines(), k) + 1
+        raise ValueError(
+            f"{name}: line {lineno}: {toks[k]!r} (row {k % rows}, column {k // rows}): NaN and "
+            "infinite entries are not accepted"
+        )
     return np.ascontiguousarray(flat.reshape(cols, rows).T)
 
 

@@ -101,7 +101,8 @@ def read_mesh(
     Reads ``Vertices`` (dropping the reference column), ``Tetrahedra`` and ``Triangles``
     (1-based, reference column dropped). Accepts keywords and counts on the same or the next
     line, ``#`` comments, ``Edges``/``Corners``/``Ridges``/... sections (skipped), a trailing
-    ``Edges 0``, a missing ``End`` and a missing final newline. Non-empty quad/hex/prism
+    ``Edges 0``, and a missing ``End`` or a missing final newline (not both: that is a file cut
+    inside its last line). Non-empty quad/hex/prism
     sections raise, as they cannot be returned.
 
     Parameters
@@ -132,6 +133,7 @@ def read_mesh(
     dim = None
     seen: set[str] = set()
     V = T = F = None
+    ended = False
     while True:
         k = tk.pos
         word = tk.next()
@@ -139,6 +141,7 @@ def read_mesh(
             break
         key = word.lower()
         if key == "end":
+            ended = True
             break
         if key in seen:
             raise tk.error_at(k, f"section {word!r} appears twice")
@@ -176,6 +179,10 @@ def read_mesh(
                 raise tk.error_at(k, f"{n} {word} are not supported (only tets and triangles)")
         else:
             raise tk.error_at(k, f"expected a MEDIT section keyword, got {word!r}")
+    if not ended and tk.src.last_line_unterminated:
+        raise tk.src.eof_error(
+            "the file ends inside a line (no newline, no 'End'): it looks cut in its last number"
+        )
     if V is None:
         raise tk.src.eof_error("no 'Vertices' section")
     if T is None:

@@ -71,6 +71,11 @@ def read_obj(
     # line by line and raises with the line number, or handles the unusual-but-valid case.
     parsed = _obj_parse_fast(src)
     V, idx, sizes = parsed if parsed is not None else _obj_parse_checked(src)
+    if not sizes.size and _OBJ_PER_CORNER.search(src.text):
+        raise src.eof_error(
+            "the file has vertex normals or texture coordinates (vn/vt) but no face: it looks "
+            "cut before its 'f' lines"
+        )
     F = _fan_triangulate(idx, sizes)
     if dim == 2:
         off = np.flatnonzero(V[:, 2] != 0)
@@ -88,6 +93,7 @@ def read_obj(
 
 
 _OBJ_KNOWN = _OBJ_IGNORED | {"v", "f"}
+_OBJ_PER_CORNER = re.compile(r"^[ \t]*(vn|vt)[ \t]", re.MULTILINE)
 _OBJ_KEYWORD = re.compile(r"^[ \t]*(\S+)", re.MULTILINE)
 _OBJ_V3 = re.compile(r"^[ \t]*v[ \t]+(\S+)[ \t]+(\S+)[ \t]+(\S+)[ \t\r]*$", re.MULTILINE)
 _OBJ_F = re.compile(r"^[ \t]*f[ \t]+(.*)$", re.MULTILINE)

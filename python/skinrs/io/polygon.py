@@ -17,7 +17,7 @@ def read_polygon_dat(
     """Read a poly2tri ``.dat`` polygon: an outer ring, then rings after each ``HOLE`` line.
 
     Each point is a line ``x y``; the last point of a ring is not repeated. Blank lines and
-    CRLF line ends are fine. Every ring needs at least 3 points.
+    CRLF line ends are fine; a last line without a newline is a cut file and raises. Every ring needs at least 3 points.
 
     Parameters
     ----------
@@ -51,6 +51,8 @@ def read_polygon_dat(
         if len(s) != 2 or any(v is None or not np.isfinite(v) for v in xy):
             raise src.error(lineno, f"expected a point 'x y' or 'HOLE', got {raw.strip()!r}")
         rings[-1].append(cast("list[float]", xy))
+    if src.last_line_unterminated:
+        raise src.eof_error("the last line has no newline: the file looks cut inside it")
     for ring, lineno in zip(rings, starts):
         if len(ring) < 3:
             what = "outer ring" if lineno == 1 else "hole"

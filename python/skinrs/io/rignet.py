@@ -101,7 +101,28 @@ def read_rignet_rig(path: str | os.PathLike[str]) -> dict[str, Any]:
             raise src.error(ln, f"'hier' makes {names[c]!r} a child, but it is {why}")
         parent_line[c] = ln
     W = _rignet_skin(src, skins, joint, len(names))
+    _rignet_tree(src, names, root, BE)
     return {"names": names, "C": np.array(C, dtype=np.float64), "BE": BE, "root": root, "W": W}
+
+
+def _rignet_tree(src: _Source, names: list[str], root: int, BE: NDArray[np.int64]) -> None:
+    """Every joint hangs from the root through 'hier' lines (no cycle, none missing)."""
+    children: dict[int, list[int]] = {}
+    for p, c in BE.tolist():
+        children.setdefault(p, []).append(c)
+    reached = np.zeros(len(names), dtype=bool)
+    stack = [root]
+    while stack:
+        j = stack.pop()
+        if not reached[j]:
+            reached[j] = True
+            stack += children.get(j, [])
+    if not reached.all():
+        j = int(np.flatnonzero(~reached)[0])
+        raise src.eof_error(
+            f"joint {names[j]!r} is not connected to the root {names[root]!r} by 'hier' lines "
+            "(a cycle, or the file is cut)"
+        )
 
 
 def _rignet_skin(
@@ -133,4 +154,9 @@ def _rignet_skin(
                 raise src.error(lineno, f"joint {name!r} appears twice for vertex {vid}")
             used.add(j)
             W[vid, j] = w
+        total = W[vid].sum()
+        if abs(total - 1.0) > 1e-3:
+            raise src.error(
+                lineno, f"the weights of vertex {vid} sum to {total:.6g}, not 1 (a cut line?)"
+            )
     return W

@@ -19,7 +19,8 @@ def read_tgf(path: str | os.PathLike[str], *, return_point_handles: bool = False
     ``#`` line, bone lines ``i j [is_bone is_pseudo is_cage]`` (1-based, parent -> child) and
     a closing ``#``; anything after it is ignored, as libigl does. Extra joint columns (often
     uninitialised garbage such as ``6.95e-310``) are ignored. A joint line with only ``x y``
-    gets ``z = 0``. Blank lines, a missing final newline and a missing bone section are fine.
+    gets ``z = 0``. Blank lines and a missing bone section are fine; a last data line without a
+    newline and no closing ``#`` after it is a cut file and raises.
     Pseudo edges and cage edges are not supported and raise.
 
     Parameters
@@ -61,6 +62,12 @@ def read_tgf(path: str | os.PathLike[str], *, return_point_handles: bool = False
             bones.append(_tgf_bone(src, lineno, s))
     if not joints:
         raise src.eof_error("expected at least one joint line 'index x y z'")
+    if section < 2 and src.last_line_unterminated and not src.lines[-1].lstrip().startswith("#"):
+        # a data line without newline and no closing '#': the file was cut inside that line
+        raise src.eof_error(
+            "the file ends inside a line (no newline, no closing '#'): it looks cut; libigl "
+            "writes '#' after the joints and after the bones"
+        )
     n = len(joints)
     for a, b, lineno in bones:
         for j in (a, b):
