@@ -79,7 +79,7 @@ def test_connected_components_huge_counts(sandbox):
 def test_bone_parents_huge_joint_numbers(sandbox):
     out = sandbox.call("skinrs:bone_parents", np.array([[0, 10**10]]))
     assert out.error is None and out.value.tolist() == [-1]
-    out = sandbox.call("skinrs:bone_parents", np.array([[0, 1]]), 10**9)
+    out = sandbox.call("skinrs:bone_parents", np.array([[0, 1]]), n_joints=10**9)
     assert out.error is None and out.value.tolist() == [-1]
 
 
