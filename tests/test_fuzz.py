@@ -287,6 +287,13 @@ def check_outcome(out, spec, kwargs, arg, expect):
     spec.contract(out.value, kwargs)
 
 
+def _source(fn) -> str:
+    try:
+        return inspect.getsource(fn).strip()
+    except OSError:  # lambdas made in a comprehension
+        return repr(fn)
+
+
 def _all_specs():
     return sorted(SPECS)
 
@@ -304,7 +311,7 @@ def test_public_function(name, sandbox):
         options = breakers(spec.kinds[arg])
         which = data.draw(st.integers(0, len(options) - 1), label="breaker")
         fn, expect = options[which]
-        note(f"breaker: {inspect.getsource(fn).strip()}")
+        note(f"breaker: {_source(fn)}")
         kwargs = dict(base)
         start = kwargs.get(arg)
         if start is None and spec.present and arg in spec.present:
@@ -391,7 +398,7 @@ def test_reader(reader, sandbox, tmp_path_factory):
     def run(data):
         which = data.draw(st.integers(0, len(MUTATIONS) - 1), label="mutation")
         fn, expect = MUTATIONS[which]
-        note(f"mutation: {inspect.getsource(fn).strip()}")
+        note(f"mutation: {_source(fn)}")
         content = fn(text, data.draw)
         path = folder / fname
         if isinstance(content, bytes):

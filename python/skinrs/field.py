@@ -421,7 +421,7 @@ class GeometricField:
         simplices = None
         if F is None:
             if n <= 9:
-                raise ValueError(f"a point cloud needs more than 9 points, got {n}")
+                raise ValueError(f"V: a point cloud (F=None) needs more than 9 points, got {n}")
             Fb = None
             self._normal_elems = np.zeros((0, d), dtype=np.int64)
         else:

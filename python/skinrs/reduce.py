@@ -560,9 +560,13 @@ def random_skeleton_poses(
     C, BE = _bones(C, BE)
     n_poses = positive_int(n_poses, "n_poses")
     max_angle = positive_float(max_angle, "max_angle")
+    if max_angle > np.pi:
+        raise ValueError(f"max_angle must be at most pi (radians), got {max_angle!r}")
     max_twist = (
         max_angle / 3 if max_twist is None else _checks.non_negative_float(max_twist, "max_twist")
     )
+    if max_twist > np.pi:
+        raise ValueError(f"max_twist must be at most pi (radians), got {max_twist!r}")
     if not isinstance(seed, np.random.Generator):
         seed = _checks.seed(seed)
     rng = np.random.default_rng(seed)
