@@ -428,6 +428,7 @@ SPECS: dict[str, Spec] = {
         },
         _contract_field,
         weight=1,
+        optional=("steps", "n_points", "samples", "pool", "upsamples"),
     ),
     "field_evaluate": Spec(
         "_fuzz_cases:field_evaluate",

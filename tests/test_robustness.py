@@ -96,7 +96,7 @@ def test_wrong_dimensions_do_not_build_huge_messages():
     with pytest.raises(ValueError, match=r"bc must have shape \(n, m\)"):
         skinrs.bbw_dual_constrained(V, T, np.array([0, 1]), np.array([1.0, 0.0]))
     with pytest.raises(ValueError, match="W must have shape"):
-        skinrs.reduce_weights(np.array([0.5, 0.5]), 1, "k-largest")
+        skinrs.reduce_weights(np.array([0.5, 0.5]), 1, method="k-largest")
     with pytest.raises(ValueError, match="weights must have shape"):
         skinrs.unpack_weights(np.array([[0]]), np.array([1.0]), 2)
     with pytest.raises(ValueError, match="weights must have shape"):

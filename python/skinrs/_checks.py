@@ -220,12 +220,13 @@ def integer(x: Any, name: str, lo: int | None = None, hi: int | None = None) -> 
     is_int = isinstance(x, (int, np.integer)) and not isinstance(x, (bool, np.bool_))
     if not is_int:
         raise ValueError(f"{name} must be an integer, got {x!r}")
-    x = int(x)
-    if (lo is not None and x < lo) or (hi is not None and x > hi):
-        lo_s = "" if lo is None else f"{lo}"
-        hi_s = "" if hi is None else f"{hi}"
-        raise ValueError(f"{name} must be an integer in {lo_s}..{hi_s}, got {x}")
-    return int(x)
+    v = int(x)
+    if lo is not None and v < lo:
+        what = "a non-negative integer" if lo == 0 else f"an integer >= {lo}"
+        raise ValueError(f"{name} must be {what}, got {v}")
+    if hi is not None and v > hi:
+        raise ValueError(f"{name} must be at most {hi}, got {v}")
+    return v
 
 
 def positive_int(x: Any, name: str, hi: int = 2**62) -> int:

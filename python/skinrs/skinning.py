@@ -341,6 +341,7 @@ def forward_kinematics(C: ArrayLike, BE: ArrayLike, Q: ArrayLike) -> NDArray[np.
     """
     C = as_points(C, "C", dims=(2, 3))
     BE = as_index_array(BE, C.shape[0], "BE", cols=2)
+    Q = _checks.as_real_array(Q, "Q")
     if C.shape[1] == 2:
         return _forward_kinematics_2d(C, BE, Q)
     if np.ndim(Q) == 3:
