@@ -11,8 +11,6 @@ for surfaces TetGen rejects, ``pytetwild``: ``pip install skinrs[mesh]``.
 
 from __future__ import annotations
 
-import itertools
-import re
 import time
 import warnings
 from collections.abc import Callable
@@ -22,8 +20,26 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from . import _checks, _skinrs
-from ._checks import Callback, as_index_array, as_points
+from ._checks import Callback, as_points
 from ._external_meshers import _INSTALL, _self_intersects, _tetgen, _tetwild, _triangle
+from ._meshing_checks import (  # noqa: F401
+    _MAX_SAMPLES,
+    _MESHER_SWITCHES,
+    _SWITCH_SYNTAX,
+    _check_sample_count,
+    _checked_domain,
+    _checked_flags,
+    _first_duplicate_row,
+)
+from ._meshing_geometry import (
+    Arr,
+    Handles,
+    _as_2d,
+    _bone_segments,
+    _interpolate,
+    _rows_match,
+    _winding_number,
+)
 from ._skeleton_sampling import _bc_matrix, _mean_edge_length, sample_skeleton
 from ._tet_edit import (  # noqa: F401 - tests reach the last two as meshing._*
     _barycentric,
@@ -32,7 +48,6 @@ from ._tet_edit import (  # noqa: F401 - tests reach the last two as meshing._*
     _snap,
     _tet_volumes,
 )
-from .field import winding_number as _fast_winding_number
 
 __all__ = [
     "MeshingWarning",
@@ -44,18 +59,9 @@ __all__ = [
 
 _BBW_DEFAULTS: dict[str, Any] = _skinrs.BBW_DEFAULTS
 
-Arr = NDArray[Any]
-#: Per sample, the handle columns it belongs to.
-Handles = list[list[int]]
-
 
 class MeshingWarning(UserWarning):
     """Something in the meshing needed a compromise (bone partly outside, snapped samples)."""
-
-
-def _winding_number(V: Arr, F: Arr, Q: Arr) -> Arr:
-    """Exact generalised winding numbers (the hierarchical sum with no far-field expansion)."""
-    return _fast_winding_number(V, F, Q, beta=np.inf)
 
 
 def _keep_inside(
@@ -84,21 +90,6 @@ def _keep_inside(
             )
     keep = np.flatnonzero(inside)
     return S[keep], [handles[r] for r in keep]
-
-
-def _as_2d(V: Arr, F: Arr | None) -> tuple[Arr, Arr]:
-    """2D input: ``V (n, 2)`` (or ``(n, 3)`` with z = 0) with triangles, edges or nothing."""
-    V2 = V[:, :2]
-    if F is None:
-        n = len(V2)
-        return V2, np.c_[np.arange(n), (np.arange(n) + 1) % n]
-    if F.shape[1] == 2:
-        return V2, F
-    # boundary edges of a triangle mesh, oriented like its triangles
-    E = np.vstack([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
-    key = np.sort(E, axis=1)
-    _, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    return V2, E[cnt[inv.reshape(-1)] == 1]
 
 
 def mesh_with_skeleton(
@@ -230,107 +221,6 @@ def mesh_with_skeleton(
     return Vv, T, b[order].astype(np.int64), bc[order]
 
 
-# Bone samples a call may insert: each costs the mesher a few kB; far more is a unit mistake.
-_MAX_SAMPLES = 10**6
-
-# Switches passed on to Triangle / TetGen: the ones that only tune quality, size, verbosity or
-# checks. Others change what the mesher reads or returns (refinement of an existing mesh, point
-# files, second-order elements, zero-based output ...) and can crash the C code.
-_MESHER_SWITCHES = {True: set("pqaYADjSCQVuO"), False: set("pqaYAOSTVQCMd")}
-_SWITCH_SYNTAX = re.compile(r"(?:[A-Za-z](?:\d+(?:\.\d*)?|\.\d+)?(?:/\d+(?:\.\d*)?)?)*")
-
-
-def _checked_flags(flags: object, planar: bool) -> str | None:
-    """``flags`` (None or a Triangle / TetGen switch string) after checking it."""
-    if flags is None:
-        return None
-    tool = "Triangle" if planar else "TetGen"
-    if not isinstance(flags, str) or len(flags) > 100 or not _SWITCH_SYNTAX.fullmatch(flags):
-        raise ValueError(f"flags {str(flags)[:40]!r} is not a {tool} switch string (e.g. 'pq30Y')")
-    bad = sorted({c for c in flags if c.isalpha()} - _MESHER_SWITCHES[planar])
-    if bad:
-        allowed = "".join(sorted(_MESHER_SWITCHES[planar]))
-        raise ValueError(
-            f"flags: {tool} switch(es) {''.join(bad)!r} are not supported here (allowed: {allowed})"
-        )
-    if "p" not in flags:
-        raise ValueError(
-            f"flags must contain 'p' ({tool} meshes the given boundary), got {flags!r}"
-        )
-    return flags
-
-
-def _check_sample_count(
-    C: Arr,
-    BE: Arr | None,
-    nP: int,
-    spacing: float,
-    min_samples: int,
-    samples_per_edge: float,
-) -> None:
-    """ValueError before sampling when the bones would get more than ``_MAX_SAMPLES`` samples."""
-    if BE is None or not len(BE):
-        return
-    L = np.linalg.norm(C[BE[:, 1]] - C[BE[:, 0]], axis=1)
-    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
-        count = nP + float(np.maximum(min_samples, np.ceil(L / spacing) + 1).sum())
-    if not count <= _MAX_SAMPLES:
-        raise ValueError(
-            f"samples_per_edge={samples_per_edge:g} would put {count:.3g} samples on the bones "
-            f"(at most {_MAX_SAMPLES:,}); lower samples_per_edge or min_samples"
-        )
-
-
-def _first_duplicate_row(A: Arr) -> tuple[int, int] | None:
-    """``(i, j)``, two rows of ``A`` that are equal, or None."""
-    _, first, inverse = np.unique(A, axis=0, return_index=True, return_inverse=True)
-    inverse = inverse.reshape(-1)
-    dup = np.flatnonzero(first[inverse] != np.arange(len(A)))
-    if not len(dup):
-        return None
-    j = int(dup[0])
-    return int(first[inverse[j]]), j
-
-
-def _checked_domain(
-    V: ArrayLike, F: ArrayLike | None, C: ArrayLike, BE: ArrayLike | None, P: ArrayLike | None
-) -> tuple[Arr, Arr | None, Arr, Arr | None, Arr | None, bool]:
-    """The arguments of :func:`mesh_with_skeleton` as checked arrays, and whether it is 2D."""
-    V = _checks.spans(as_points(V, "V", dims=(2, 3), min_rows=3))
-    n = len(V)
-    # Triangle and TetGen crash or silently merge on repeated input vertices
-    dup = _first_duplicate_row(V)
-    if dup is not None:
-        raise ValueError(
-            f"V rows {dup[0]} and {dup[1]} are the same point {V[dup[0]].tolist()}: remove the "
-            "duplicate vertex (and renumber F)"
-        )
-    # 2D: 2 columns, or 3 with z = 0 (2D OBJ files); a closed 3D surface is never flat
-    planar = V.shape[1] == 2 or not np.any(V[:, 2])
-    if F is None and not planar:
-        raise ValueError("a 3D surface needs its triangles F")
-    if F is not None:
-        F = as_index_array(F, n, "F", cols=(2, 3) if planar else 3, allow_empty=False)
-        srt = np.sort(F, axis=1)
-        rep = np.flatnonzero(np.any(srt[:, 1:] == srt[:, :-1], axis=1))
-        if len(rep):
-            raise ValueError(f"F row {int(rep[0])} repeats a vertex: {F[rep[0]].tolist()}")
-    dim = 2 if planar else 3
-    C = as_points(C, "C", dims=(2, 3))
-    if C.shape[1] != dim:
-        if C.shape[1] == 3 and dim == 2 and not np.any(C[:, 2]):
-            C = np.ascontiguousarray(C[:, :2])
-        else:
-            raise ValueError(f"C must have {dim} columns like the domain, got {C.shape}")
-    BE = None if BE is None else as_index_array(BE, len(C), "BE", cols=2)
-    P = None if P is None else as_index_array(P, len(C), "P", ndim=1)
-    if (0 if P is None else len(P)) + (0 if BE is None else len(BE)) == 0:
-        raise ValueError("no handles: give bones BE and/or point handles P")
-    if BE is not None and np.any(BE[:, 0] == BE[:, 1]):
-        raise ValueError(f"bone {int(np.flatnonzero(BE[:, 0] == BE[:, 1])[0])} has zero length")
-    return V, F, C, BE, P, planar
-
-
 def _mesh_planar(
     Vd: Arr,
     F: Arr | None,
@@ -373,28 +263,6 @@ def _tetgen_keeping_rows(
     if not _rows_match(Vv, V, Si):
         return None, None, None
     return Vv, T, None
-
-
-def _rows_match(Vv: Arr, V: Arr, S: Arr) -> bool:
-    n, s = len(V), len(S)
-    return len(Vv) >= n + s and np.array_equal(Vv[:n], V) and np.array_equal(Vv[n : n + s], S)
-
-
-def _bone_segments(S: Arr, handles: Handles, insert: Arr, nP: int, nB: int) -> Arr:
-    """Segments between consecutive inserted samples of each bone (for Triangle)."""
-    pos = {int(r): k for k, r in enumerate(insert)}
-    segs = []
-    for e in range(nB):
-        rows = [r for r, hs in enumerate(handles) if nP + e in hs and r in pos]
-        if len(rows) < 2:
-            continue
-        pts = S[rows]
-        d = pts - pts[0]
-        far = pts[np.argmax(np.linalg.norm(d, axis=1))] - pts[0]
-        order = np.argsort(d @ far)
-        ids = [pos[rows[o]] for o in order]
-        segs += list(itertools.pairwise(ids))
-    return np.array(segs, np.int64).reshape(-1, 2)
 
 
 class _TetWildFallback:
@@ -594,24 +462,3 @@ def skin_weights(
         )
         out.append(info)
     return out[0] if len(out) == 1 else tuple(out)
-
-
-def _interpolate(Q: Arr, Vv: Arr, T: Arr, W: Arr) -> Arr:
-    """Weights at points ``Q`` by barycentric interpolation in the best tet around the nearest
-    vertex (for the fallback mesh, whose surface only approximates the input)."""
-    from scipy.spatial import cKDTree
-
-    _, near = cKDTree(Vv).query(Q)
-    inc: list[list[int]] = [[] for _ in range(len(Vv))]
-    for t, row in enumerate(T):
-        for v in row:
-            inc[v].append(t)
-    out = np.empty((len(Q), W.shape[1]))
-    for i, (q, v) in enumerate(zip(Q, near, strict=True)):
-        around = T[inc[v]]
-        lam = _barycentric(Vv, around, q)
-        best = int(np.argmax(lam.min(axis=1)))
-        lam = np.clip(lam[best], 0, None)
-        lam /= lam.sum()
-        out[i] = lam @ W[around[best]]
-    return out
