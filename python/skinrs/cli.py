@@ -11,34 +11,32 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ._cli_commands import (  # noqa: F401
+from ._cli_commands import (  # noqa: F401 - re-exported
+    WEIGHT_EXTS,
+    Progress,
+    UsageError,
     _example_poses,
+    _ext,
     _pose_transforms,
     _reduce_all_rows,
     _solve_weights,
     _write_weights_output,
+    atomic_output,
     cmd_batch,
     cmd_info,
     cmd_pose,
     cmd_reduce,
     cmd_weights,
-    io_unpack,
-    weights_job,
-)
-from ._cli_io import (  # noqa: F401
-    MESH_EXTS,
-    WEIGHT_EXTS,
-    Progress,
-    UsageError,
-    _ext,
-    atomic_output,
     gap_progress,
+    io_unpack,
     read_any_mesh,
     read_skeleton,
     read_weights,
     say,
+    weights_job,
     write_weights,
 )
+from ._cli_io import MESH_EXTS
 
 # --------------------------------------------------------------------------------------------
 # parser
