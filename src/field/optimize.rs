@@ -13,6 +13,15 @@
 //! After the schedule, `optimize` runs further steps at the final resolution (used to resume
 //! after [`GeometricField::paint`]).
 
+//!
+//! Layout: this module holds the field, its set-up and the optimisation loop (steps,
+//! upsampling, painting); [`options`] the options, their App. A defaults and their checks;
+//! [`setup`] the input checks and helpers of the set-up (unit box, handles, point cloud
+//! radius, spatial order of points).
+
+mod options;
+mod setup;
+
 use super::adam::Adam;
 use super::energy::{McSample, Problem};
 use super::kernel::{FieldValue, PointSet, RayStats};
@@ -23,70 +32,10 @@ use crate::error::SkinResult;
 use crate::invalid;
 use crate::progress::{Event, Progress};
 use crate::rng::Rng;
-
-/// Options of the field (defaults: App. A).
-#[derive(Clone, Debug)]
-pub struct FieldOptions {
-    /// Initial number of points: 2^11 (2D) / 2^13 (3D).
-    pub n_init: usize,
-    /// Monte-Carlo samples per step M: 2^12 (2D) / 2^11 (3D).
-    pub samples: usize,
-    /// Total steps of the schedule (6000).
-    pub steps: usize,
-    /// Number of doublings of the point set (3).
-    pub upsamples: usize,
-    /// Initial learning rate (0.2) and its divisor at each upsampling (3).
-    pub lr: f64,
-    pub lr_decay: f64,
-    pub beta1: f64,
-    pub beta2: f64,
-    pub adam_eps: f64,
-    /// Finite-difference step `h` in units of sigma (1; the paper ties h to the spacing).
-    pub h_sigma: f64,
-    /// Mollifier / Neumann radius in units of sigma (0.5, App. A).
-    pub eps_sigma: f64,
-    /// Zero-Neumann reparameterisation (eq. 9).
-    pub neumann: bool,
-    /// Visibility-aware kernel (false: plain Gaussian, for comparisons).
-    pub visibility: bool,
-    pub wn_l: f64,
-    pub wn_h: f64,
-    pub seed: u64,
-    /// Interior samples drawn once by rejection; each step takes its M samples from this pool.
-    pub pool: usize,
-    /// Cache each pool sample's visible points (exact; memory ~ pool x 64 x 9 x 4 bytes in 3D).
-    pub cache_visibility: bool,
-    /// Skip rays whose segment is covered by boundary-free balls (exact; off only to measure).
-    pub skip_rays: bool,
-}
-
-impl FieldOptions {
-    /// App. A defaults for dimension `d`.
-    pub fn defaults(d: usize) -> Self {
-        let three = d == 3;
-        FieldOptions {
-            n_init: if three { 1 << 13 } else { 1 << 11 },
-            samples: if three { 1 << 11 } else { 1 << 12 },
-            steps: 6000,
-            upsamples: 3,
-            lr: 0.2,
-            lr_decay: 3.0,
-            beta1: 0.9,
-            beta2: 0.8,
-            adam_eps: 1e-10,
-            h_sigma: 1.0,
-            eps_sigma: 0.5,
-            neumann: false,
-            visibility: true,
-            wn_l: 0.1,
-            wn_h: 0.25,
-            seed: 0,
-            pool: if three { 1 << 16 } else { 1 << 17 },
-            cache_visibility: true,
-            skip_rays: true,
-        }
-    }
-}
+use options::check_options;
+pub use options::{FieldOptions, MAX_POINTS};
+pub use setup::unit_box;
+use setup::{check_handles, check_solid, cloud_radius, permute, spatial_order, to_unit};
 
 /// Totals for reporting.
 #[derive(Clone, Debug, Default)]
@@ -119,45 +68,6 @@ pub struct GeometricField<const D: usize> {
     pub stats: FieldStats,
     bufs: Vec<Vec<f64>>,
     cache: super::energy::VisibilityCache,
-}
-
-/// `(x - offset) * scale` mapping the rows of `v` into the unit box (largest side 1).
-pub fn unit_box<const D: usize>(v: &ndarray::ArrayView2<f64>) -> SkinResult<([f64; D], f64)> {
-    let mut lo = [f64::INFINITY; D];
-    let mut hi = [f64::NEG_INFINITY; D];
-    for r in v.rows() {
-        for k in 0..D {
-            lo[k] = lo[k].min(r[k]);
-            hi[k] = hi[k].max(r[k]);
-        }
-    }
-    let ext = (0..D).map(|k| hi[k] - lo[k]).fold(0.0, f64::max);
-    if !(ext > 0.0 && ext.is_finite()) {
-        return invalid!("the vertices span no extent (all coincide, or V is empty)");
-    }
-    crate::limits::check_coordinates("V", v)?;
-    crate::limits::check_extent("V", ext)?;
-    Ok((lo, 1.0 / ext))
-}
-
-/// A field lives in a solid (3D) or a region (2D): vertices that span no extent along some axis
-/// bound nothing, and every sample would sit on the boundary.
-fn check_solid<const D: usize>(v: &ndarray::ArrayView2<f64>, scale: f64) -> SkinResult<()> {
-    for k in 0..D {
-        let c = v.column(k);
-        let lo = c.iter().cloned().fold(f64::INFINITY, f64::min);
-        let hi = c.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
-        if (hi - lo) * scale <= 1e-9 {
-            return invalid!(
-                "V is flat: it spans no extent along axis {k} ({:e} against {:e} along its \
-                 longest axis), so it encloses no {}; a field needs a shape with an interior",
-                hi - lo,
-                1.0 / scale,
-                if D == 3 { "volume" } else { "area" }
-            );
-        }
-    }
-    Ok(())
 }
 
 impl<const D: usize> GeometricField<D>
@@ -461,115 +371,4 @@ where
         ps.visible_within(&self.domain, o, d, r, &[], visibility, &mut cand, &mut st);
         val.eval(ps, z, &cand, &self.f, self.k())
     }
-}
-
-/// Morton order of points (see [`super::coherent_order`]).
-fn spatial_order<const D: usize>(x: &[[f64; D]]) -> Vec<usize> {
-    let a = super::sampling::to_array(x);
-    super::coherent_order::<D>(&a.view())
-}
-
-/// Rows `order[0], order[1], ...` of `v` seen as rows of `width` entries.
-fn permute<T: Copy>(v: &[T], order: &[usize], width: usize) -> Vec<T> {
-    let mut out = Vec::with_capacity(v.len());
-    for &i in order {
-        out.extend_from_slice(&v[i * width..(i + 1) * width]);
-    }
-    out
-}
-
-fn to_unit<const D: usize>(x: &[f64; D], offset: &[f64; D], scale: f64) -> [f64; D] {
-    std::array::from_fn(|k| (x[k] - offset[k]) * scale)
-}
-
-/// Ball radius for point-cloud sampling: the median distance to the 9th neighbour of the cloud.
-fn cloud_radius(v: &ndarray::Array2<f64>) -> SkinResult<f64> {
-    if v.nrows() <= super::kernel::SIGMA_KNN {
-        return invalid!(
-            "a point cloud needs more than {} points, got {}",
-            super::kernel::SIGMA_KNN,
-            v.nrows()
-        );
-    }
-    let mut d = super::knn_distance(v.view(), super::kernel::SIGMA_KNN, &mut crate::Silent)?;
-    d.sort_by(f64::total_cmp);
-    Ok(d[d.len() / 2])
-}
-
-/// Largest point set, sample count or pool a field accepts (each costs tens of bytes per entry
-/// and per handle).
-pub const MAX_POINTS: usize = 1 << 24;
-
-fn check_options(o: &FieldOptions) -> SkinResult<()> {
-    if o.n_init <= super::kernel::SIGMA_KNN || o.samples == 0 || o.pool == 0 {
-        return invalid!(
-            "n_init must exceed {} and samples, pool must be positive",
-            super::kernel::SIGMA_KNN
-        );
-    }
-    let pos = [o.lr, o.lr_decay, o.h_sigma, o.eps_sigma, o.adam_eps];
-    if pos.iter().any(|x| !(*x > 0.0 && x.is_finite())) {
-        return invalid!("lr, lr_decay, h, eps and adam_eps must be positive and finite");
-    }
-    if !(0.0..1.0).contains(&o.beta1) || !(0.0..1.0).contains(&o.beta2) {
-        return invalid!("Adam's beta1 and beta2 must lie in [0, 1)");
-    }
-    if o.upsamples > 8 {
-        return invalid!("at most 8 upsamplings (the point set doubles each time)");
-    }
-    // Each of these sizes one allocation before any other work: refuse sizes no machine holds.
-    let most_points = o
-        .n_init
-        .checked_shl(o.upsamples as u32)
-        .unwrap_or(usize::MAX);
-    for (name, x) in [
-        ("n_points * 2^upsamples", most_points),
-        ("samples", o.samples),
-        ("pool", o.pool),
-    ] {
-        if x > MAX_POINTS {
-            return invalid!("{name} must be at most {MAX_POINTS}, got {x}");
-        }
-    }
-    Ok(())
-}
-
-/// Every handle must reach inside the shape: some point along it (ends and 7 interior points)
-/// has winding number >= wn_l.
-fn check_handles<const D: usize>(
-    domain: &Domain<D>,
-    handles: &[([f64; D], [f64; D], usize)],
-    k: usize,
-) -> SkinResult<()>
-where
-    Boundary<D>: BoundaryQueries<D>,
-{
-    let mut seen = vec![false; k];
-    for (a, b, c) in handles {
-        if *c >= k {
-            return invalid!("handle column {c} outside 0..{k}");
-        }
-        seen[*c] = true;
-        if domain.winding.is_none() {
-            continue;
-        }
-        let best = (0..=8)
-            .map(|s| {
-                let t = s as f64 / 8.0;
-                let p: [f64; D] = std::array::from_fn(|q| a[q] + t * (b[q] - a[q]));
-                domain.wn(&p)
-            })
-            .fold(f64::NEG_INFINITY, f64::max);
-        if best < domain.wn_l {
-            return invalid!(
-                "handle {c} lies outside the shape: its generalized winding number is at most \
-                 {best:.3} < wn_l = {} everywhere along it",
-                domain.wn_l
-            );
-        }
-    }
-    if let Some(c) = seen.iter().position(|s| !s) {
-        return invalid!("handle column {c} has no primitive");
-    }
-    Ok(())
 }
