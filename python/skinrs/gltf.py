@@ -17,12 +17,19 @@ where skinrs has them, and a skinrs pose moves the mesh in Blender as :func:`ski
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
+from types import ModuleType
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from . import gltf_rig as rig
 from ._checks import as_elements, as_index_array, as_points
-from .gltf_read import read_gltf
+from .gltf_read import GltfAsset, read_gltf
+
+if TYPE_CHECKING:
+    import pygltflib
 
 __all__ = ["read_gltf", "write_gltf"]
 
@@ -33,12 +40,13 @@ _COMPONENTS = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5
 _CODES = {np.dtype(v): k for k, v in _COMPONENTS.items()}
 
 
-def _pygltflib():
+def _pygltflib() -> ModuleType:
     try:
         import pygltflib
     except ImportError as e:  # pragma: no cover - depends on the environment
         raise ImportError("glTF needs pygltflib: pip install 'skinrs[gltf]'") from e
-    return pygltflib
+    module: ModuleType = pygltflib
+    return module
 
 
 # --------------------------------------------------------------------------------------------
@@ -48,10 +56,10 @@ def _pygltflib():
 class _Blob:
     """One binary buffer: arrays appended 4-byte aligned, one bufferView + accessor each."""
 
-    def __init__(self, g, lib):
+    def __init__(self, g: pygltflib.GLTF2, lib: ModuleType) -> None:
         self.g, self.lib, self.data = g, lib, bytearray()
 
-    def add(self, A, target=None, minmax=False) -> int:
+    def add(self, A: NDArray[Any], target: int | None = None, minmax: bool = False) -> int:
         A = np.ascontiguousarray(A)
         self.data += b"\0" * (-len(self.data) % 4)
         self.g.bufferViews.append(
@@ -73,7 +81,17 @@ class _Blob:
         return len(self.g.accessors) - 1
 
 
-def _pack(W, k, method, V, F, C, BE, P, poses):
+def _pack(
+    W: NDArray[np.float64] | tuple[ArrayLike, ArrayLike],
+    k: int,
+    method: str,
+    V: NDArray[np.float64],
+    F: NDArray[np.int64],
+    C: NDArray[np.float64],
+    BE: NDArray[np.int64],
+    P: NDArray[np.int64],
+    poses: NDArray[np.float64] | None,
+) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
     """``(indices, weights)`` with at most ``k`` influences per vertex."""
     if isinstance(W, tuple):
         I = np.asarray(W[0], dtype=np.int64)
@@ -100,7 +118,9 @@ def _pack(W, k, method, V, F, C, BE, P, poses):
     return reduce_weights(W, k, method=method, V=V, F=F, bone_transforms=poses)
 
 
-def _joint_weights(I, A, column_joint, n_joints):
+def _joint_weights(
+    I: NDArray[np.int64], A: NDArray[np.float64], column_joint: NDArray[np.int64], n_joints: int
+) -> tuple[NDArray[np.unsignedinteger[Any]], NDArray[np.float32]]:
     """Per-vertex joint indices and float32 weights summing to 1 (glTF 3.7.3.3), 4 or 8 wide."""
     n = len(I)
     dense = np.zeros((n, n_joints))
@@ -121,21 +141,21 @@ def _joint_weights(I, A, column_joint, n_joints):
 
 
 def write_gltf(
-    path,
-    V,
-    F,
-    W,
-    C=None,
-    BE=None,
-    P=None,
+    path: str | os.PathLike[str],
+    V: ArrayLike,
+    F: ArrayLike,
+    W: ArrayLike | tuple[ArrayLike, ArrayLike],
+    C: ArrayLike | None = None,
+    BE: ArrayLike | None = None,
+    P: ArrayLike | None = None,
     *,
-    names=None,
-    poses=None,
-    times=None,
-    k=4,
-    method="poisson",
-    asset=None,
-):
+    names: Sequence[str] | None = None,
+    poses: ArrayLike | None = None,
+    times: ArrayLike | None = None,
+    k: int = 4,
+    method: str = "poisson",
+    asset: GltfAsset | None = None,
+) -> None:
     """Write a skinned mesh as glTF 2.0 (``.glb`` binary or ``.gltf`` with an embedded buffer).
 
     Parameters
@@ -225,7 +245,9 @@ def write_gltf(
         g.save_binary(path)
 
 
-def _skeleton_rig(C, BE, P, names):
+def _skeleton_rig(
+    C: ArrayLike | None, BE: ArrayLike | None, P: ArrayLike | None, names: Sequence[str] | None
+) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.int64], rig.Rig]:
     """Checked ``C, BE, P`` and the joint nodes of a skinrs skeleton (one per column)."""
     if C is None or BE is None:
         raise ValueError("pass the skeleton C and BE (or asset= from read_gltf)")
@@ -242,15 +264,28 @@ def _skeleton_rig(C, BE, P, names):
             )
         cols = [str(x) for x in names]
     jnames, parents, bind, column, labels = rig.skeleton_rig(C, BE, P, cols)
-    nodes = {"names": jnames, "parents": parents, "bind": bind, "column": column}
-    return C, BE, P, {**nodes, "labels": labels, "animations": []}
+    nodes: rig.Rig = {
+        "names": jnames,
+        "parents": parents,
+        "bind": bind,
+        "column": column,
+        "labels": labels,
+        "animations": [],
+    }
+    return C, BE, P, nodes
 
 
-def _asset_rig(asset, names, keep_animations):
+def _asset_rig(asset: GltfAsset, names: Sequence[str] | None, keep_animations: bool) -> rig.Rig:
     """The joint nodes of an asset from :func:`read_gltf`, columns renamed by ``names``."""
     j = asset["joints"]
-    out = {key: j[key] for key in ("names", "parents", "bind", "column", "labels")}
-    out["animations"] = list(j["animations"]) if keep_animations else []
+    out: rig.Rig = {
+        "names": j["names"],
+        "parents": j["parents"],
+        "bind": j["bind"],
+        "column": j["column"],
+        "labels": j["labels"],
+        "animations": list(j["animations"]) if keep_animations else [],
+    }
     if names is not None:
         if len(names) != len(j["column"]):
             raise ValueError(
@@ -262,19 +297,19 @@ def _asset_rig(asset, names, keep_animations):
     return out
 
 
-def _animation(poses, times, rig_):
+def _animation(poses: NDArray[np.float64], times: ArrayLike | None, rig_: rig.Rig) -> rig.Animation:
     """Per-column poses (frames, m, 3, 4) as skinning transforms of every joint node."""
     m = len(rig_["column"])
     if poses.ndim != 4 or poses.shape[1:] != (m, 3, 4):
         raise ValueError(f"poses must have shape (frames, {m}, 3, 4), got {poses.shape}")
     t = np.arange(len(poses)) / 24.0 if times is None else np.asarray(times, dtype=float)
     if t.shape != (len(poses),) or np.any(np.diff(t) <= 0):
-        raise ValueError(f"times must be {len(poses)} increasing seconds, got {np.shape(times)}")
+        raise ValueError(f"times must be {len(poses)} increasing seconds, got {t.shape}")
     T = rig.joint_poses(poses, rig_["column"], rig_["parents"], rig_["bind"])
     return {"name": "skinrs", "times": t, "T": T}
 
 
-def _write_skin(g, lib, blob, rig_):
+def _write_skin(g: pygltflib.GLTF2, lib: ModuleType, blob: _Blob, rig_: rig.Rig) -> None:
     """Nodes (a root, the mesh, the joints), the skin and the animations."""
     jnames, parents, bind, labels = rig_["names"], rig_["parents"], rig_["bind"], rig_["labels"]
     J0 = 2  # node 0: a common root (Panda3D needs one), node 1: the mesh, then the joints
@@ -285,8 +320,9 @@ def _write_skin(g, lib, blob, rig_):
     for j in range(len(parents)):
         tr, q, s = rig.decompose(local[j], f"the bind matrix of joint {jnames[j]!r}")
         node = lib.Node(name=str(jnames[j]), translation=tr.tolist(), rotation=q.tolist())
-        if labels[j] is not None:  # the joint of C it stands for: keeps C's numbering
-            node.extras = {"skinrs_joint": int(labels[j])}
+        label = labels[j]
+        if label is not None:  # the joint of C it stands for: keeps C's numbering
+            node.extras = {"skinrs_joint": int(label)}
         if np.abs(s - 1).max() > 1e-9:
             node.scale = s.tolist()
         node.children = [J0 + int(c) for c in np.flatnonzero(parents == j)] or None
@@ -304,7 +340,16 @@ def _write_skin(g, lib, blob, rig_):
         _write_animation(g, lib, blob, anim, parents, bind, jnames, J0)
 
 
-def _write_animation(g, lib, blob, anim, parents, bind, jnames, J0):
+def _write_animation(
+    g: pygltflib.GLTF2,
+    lib: ModuleType,
+    blob: _Blob,
+    anim: rig.Animation,
+    parents: NDArray[np.int64],
+    bind: NDArray[np.float64],
+    jnames: list[str],
+    J0: int,
+) -> None:
     t = np.asarray(anim["times"], dtype=np.float64)
     G = rig.homogeneous(anim["T"]) @ bind  # world matrices of the joints per frame
     key = blob.add(t.astype(np.float32), minmax=True)

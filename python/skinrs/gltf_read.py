@@ -5,10 +5,15 @@ from __future__ import annotations
 import os
 import struct
 import warnings
+from typing import TYPE_CHECKING, Any, TypedDict, cast
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from . import gltf_rig as rig
+
+if TYPE_CHECKING:
+    import pygltflib
 
 __all__ = ["read_gltf"]
 
@@ -17,10 +22,31 @@ _COMPONENTS = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5
 _NCOMP = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
 
 
+class GltfJoints(rig.Rig):
+    """The joint nodes of a read skin, with the ``weights`` (n, J) of every joint node."""
+
+    weights: NDArray[np.float64]
+
+
+class GltfAsset(TypedDict):
+    """What :func:`read_gltf` returns (its docstring says what each entry holds)."""
+
+    V: NDArray[np.float64]
+    F: NDArray[np.int64]
+    vertex_map: NDArray[np.int64]
+    C: NDArray[np.float64]
+    BE: NDArray[np.int64]
+    P: NDArray[np.int64]
+    W: NDArray[np.float64]
+    names: list[str]
+    animations: list[rig.Animation]
+    joints: GltfJoints
+
+
 class _File:
     """A loaded glTF with its buffers, able to decode accessors and to name itself in errors."""
 
-    def __init__(self, path):
+    def __init__(self, path: str | os.PathLike[str]) -> None:
         from .gltf import _pygltflib
 
         lib = _pygltflib()
@@ -28,7 +54,7 @@ class _File:
         if not os.path.isfile(self.name):
             raise FileNotFoundError(self.name)
         try:
-            self.g = lib.GLTF2().load(self.name)
+            self.g: pygltflib.GLTF2 = lib.GLTF2().load(self.name)
         except (
             OSError,
             ValueError,
@@ -58,7 +84,7 @@ class _File:
                     self.buffers[i] = fh.read()
         return self.buffers[i]
 
-    def accessor(self, i: int) -> np.ndarray:
+    def accessor(self, i: int) -> NDArray[Any]:
         """``(count, ncomp)`` array (float64 for normalised integers), as the spec decodes it."""
         if not isinstance(i, int) or not 0 <= i < len(self.g.accessors):
             raise self.error(f"refers to accessor {i}, the file has {len(self.g.accessors)}")
@@ -87,17 +113,19 @@ class _File:
         )
         A = np.ascontiguousarray(raw).view(dt).reshape(a.count, nc)
         if a.normalized:
-            return A.astype(np.float64) / np.iinfo(dt).max
+            # the spec normalises integer components only (iinfo raises on a float one)
+            integer = cast("np.dtype[np.integer[Any]]", dt)
+            return A.astype(np.float64) / np.iinfo(integer).max
         return A
 
 
-def _trs_matrix(node) -> np.ndarray:
+def _trs_matrix(node: pygltflib.Node) -> NDArray[np.float64]:
     if node.matrix is not None:
         return np.asarray(node.matrix, dtype=np.float64).reshape(4, 4).T
     return _compose(node.translation, node.rotation, node.scale)
 
 
-def _compose(t, q, s) -> np.ndarray:
+def _compose(t: ArrayLike | None, q: ArrayLike | None, s: ArrayLike | None) -> NDArray[np.float64]:
     from scipy.spatial.transform import Rotation
 
     M = np.eye(4)
@@ -108,7 +136,7 @@ def _compose(t, q, s) -> np.ndarray:
     return M
 
 
-def _label(node):
+def _label(node: pygltflib.Node) -> int | None:
     """The skinrs joint index :func:`skinrs.io.write_gltf` stored on a joint node, or None."""
     x = (node.extras or {}).get("skinrs_joint") if isinstance(node.extras, dict) else None
     return x if isinstance(x, int) and not isinstance(x, bool) and x >= 0 else None
@@ -125,9 +153,14 @@ def _skinned_node(f: _File) -> int:
     return (skinned or meshes)[0]
 
 
-def _mesh(f: _File, mesh: int):
+def _mesh(
+    f: _File, mesh: int
+) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
     """Positions, triangles and per-joint weights of all primitives of one mesh, merged."""
-    Vs, Fs, Js, Ws = [], [], [], []
+    Vs: list[NDArray[np.float64]] = []
+    Fs: list[NDArray[np.int64]] = []
+    Js: list[NDArray[np.int64]] = []
+    Ws: list[NDArray[np.float64]] = []
     off = 0
     for p, prim in enumerate(f.g.meshes[mesh].primitives):
         if (prim.mode if prim.mode is not None else 4) != 4:
@@ -159,7 +192,9 @@ def _mesh(f: _File, mesh: int):
     return np.vstack(Vs), np.vstack(Fs), np.vstack(pad), np.vstack(padw)
 
 
-def _weld(V, F, W):
+def _weld(
+    V: NDArray[np.float64], F: NDArray[np.int64], W: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.float64], NDArray[np.int64]]:
     """Merges vertices at identical positions (split at UV seams / sharp edges by exporters)."""
     _, first, inverse = np.unique(V, axis=0, return_index=True, return_inverse=True)
     order = np.argsort(first)  # keep first-appearance order
@@ -179,7 +214,7 @@ def _weld(V, F, W):
     return V[first[order]], Fw[~degenerate], Ww / counts[:, None], vmap
 
 
-def _world(f: _File, local: np.ndarray) -> np.ndarray:
+def _world(f: _File, local: NDArray[np.float64]) -> NDArray[np.float64]:
     parents = np.full(len(f.g.nodes), -1)
     for i, n in enumerate(f.g.nodes):
         for c in n.children or []:
@@ -187,9 +222,11 @@ def _world(f: _File, local: np.ndarray) -> np.ndarray:
     return rig.world_matrices(parents, local)
 
 
-def _animations(f: _File, rest_local, joints, ibm):
+def _animations(
+    f: _File, rest_local: NDArray[np.float64], joints: NDArray[np.int64], ibm: NDArray[np.float64]
+) -> list[rig.Animation]:
     """Skinning transforms ``G_j(t) @ IBM_j`` (frames, J, 3, 4) at each animation's key times."""
-    out = []
+    out: list[rig.Animation] = []
     for a, anim in enumerate(f.g.animations):
         chans = [
             c for c in anim.channels if c.target.node is not None and c.target.path != "weights"
@@ -198,7 +235,7 @@ def _animations(f: _File, rest_local, joints, ibm):
             continue
         keys = [f.accessor(anim.samplers[c.sampler].input)[:, 0].astype(np.float64) for c in chans]
         t = np.unique(np.concatenate(keys))
-        trs = {}
+        trs: dict[int, dict[str, NDArray[np.float64]]] = {}
         for c, key in zip(chans, keys):
             s = anim.samplers[c.sampler]
             vals = f.accessor(s.output).astype(np.float64)
@@ -219,7 +256,7 @@ def _animations(f: _File, rest_local, joints, ibm):
     return out
 
 
-def read_gltf(path, *, weld=True):
+def read_gltf(path: str | os.PathLike[str], *, weld: bool = True) -> GltfAsset:
     """Read the skinned mesh of a glTF 2.0 file (``.gltf`` or ``.glb``).
 
     Every primitive of the first skinned mesh (or the first mesh, without a skin) is merged
@@ -263,7 +300,7 @@ def read_gltf(path, *, weld=True):
     if node.skin is None:
         V = V @ _world(f, rest_local)[n_idx][:3, :3].T + _world(f, rest_local)[n_idx][:3, 3]
         joints = np.zeros(0, dtype=np.int64)
-        ibm = np.zeros((0, 4, 4))
+        ibm: NDArray[np.float64] = np.zeros((0, 4, 4))
     else:
         skin = f.g.skins[node.skin]
         joints = np.asarray(skin.joints, dtype=np.int64)
@@ -295,8 +332,9 @@ def read_gltf(path, *, weld=True):
         while a >= 0 and int(a) not in where:
             a = node_parent[a]
         parents[j] = where.get(int(a), -1)
-    bind = np.linalg.inv(ibm) if nJ else ibm
-    scale = np.linalg.norm(np.ptp(V, axis=0)) if len(V) else 1.0
+    # numpy's stubs type inv() as floating[Any]; float64 in gives float64 out
+    bind = cast("NDArray[np.float64]", np.linalg.inv(ibm)) if nJ else ibm
+    scale = float(np.linalg.norm(np.ptp(V, axis=0))) if len(V) else 1.0
     labels = [_label(f.g.nodes[n]) for n in joints]
     C, BE, P, column = rig.handles_of_rig(parents, bind, W.max(0) > 0, 1e-6 * scale, labels)
     share = np.bincount(column, minlength=nJ)[column] if nJ else np.zeros(0)

@@ -15,18 +15,48 @@ Matrices here are 4x4 world matrices (float64); a rig is described by
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, TypedDict
+
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from .skinning import bone_parents
 
+if TYPE_CHECKING:
+    from scipy.spatial.transform import Rotation
 
-def _rotation():
+
+class Animation(TypedDict):
+    """One animation: ``name``, key ``times`` (frames,) in seconds and the skinning transforms
+    ``T`` (frames, J, 3, 4) at those times (per joint node, or per handle column)."""
+
+    name: str
+    times: NDArray[np.float64]
+    T: NDArray[np.float64]
+
+
+class Rig(TypedDict):
+    """The joint nodes of a skin: ``names``, ``parents`` (J,), ``bind`` (J, 4, 4), ``column``
+    (the joint of each handle column), ``labels`` (the joint of ``C`` each node stands for, or
+    None) and the ``animations`` (``T`` per joint node)."""
+
+    names: list[str]
+    parents: NDArray[np.int64]
+    bind: NDArray[np.float64]
+    column: NDArray[np.int64]
+    labels: Sequence[int | None]
+    animations: list[Animation]
+
+
+def _rotation() -> type[Rotation]:
     from scipy.spatial.transform import Rotation  # imported on use: ~0.2 s
 
-    return Rotation
+    rotation: type[Rotation] = Rotation
+    return rotation
 
 
-def homogeneous(T) -> np.ndarray:
+def homogeneous(T: ArrayLike) -> NDArray[np.float64]:
     """``(..., 3, 4)`` affine transforms as ``(..., 4, 4)`` matrices."""
     T = np.asarray(T, dtype=np.float64)
     M = np.zeros(T.shape[:-2] + (4, 4))
@@ -35,17 +65,20 @@ def homogeneous(T) -> np.ndarray:
     return M
 
 
-def y_to(d: np.ndarray) -> np.ndarray:
+def y_to(d: NDArray[np.float64]) -> NDArray[np.float64]:
     """The smallest rotation taking +Y to the unit direction ``d`` (3x3)."""
     y = np.array([0.0, 1.0, 0.0])
     axis = np.cross(y, d)
     s, c = np.linalg.norm(axis), float(y @ d)
     if s < 1e-12:
         return np.eye(3) if c > 0 else np.diag([1.0, -1.0, -1.0])  # half turn about X
-    return _rotation().from_rotvec(axis / s * np.arctan2(s, c)).as_matrix()
+    R: NDArray[np.float64] = _rotation().from_rotvec(axis / s * np.arctan2(s, c)).as_matrix()
+    return R
 
 
-def skeleton_rig(C, BE, P, names):
+def skeleton_rig(
+    C: NDArray[np.float64], BE: NDArray[np.int64], P: NDArray[np.int64], names: Sequence[str]
+) -> tuple[list[str], NDArray[np.int64], NDArray[np.float64], NDArray[np.int64], list[int]]:
     """Joint nodes of a skinrs skeleton, one per handle column, plus an end node per leaf bone.
 
     Column ``c`` (point handles ``P`` first, then bones, as libigl orders weights) is joint
@@ -66,19 +99,25 @@ def skeleton_rig(C, BE, P, names):
         d = C[t] - C[h]
         bind[nP + b][:3, :3] = y_to(d / np.linalg.norm(d))
         bind[nP + b][:3, 3] = C[h]
-    names = list(names)
+    jnames = list(names)
     leaves = np.setdiff1d(np.arange(m), par[par >= 0])
     for b in leaves:
-        names.append(f"{names[nP + b]}_end")
+        jnames.append(f"{jnames[nP + b]}_end")
         parents.append(nP + int(b))
         end = bind[nP + b].copy()
         end[:3, 3] = C[BE[b, 1]]
         bind.append(end)
     labels = [int(p) for p in P] + [int(h) for h in BE[:, 0]] + [int(BE[b, 1]) for b in leaves]
-    return names, np.array(parents, dtype=np.int64), np.array(bind), np.arange(nP + m), labels
+    return jnames, np.array(parents, dtype=np.int64), np.array(bind), np.arange(nP + m), labels
 
 
-def handles_of_rig(parents, bind, weights_used, tol, labels=None):
+def handles_of_rig(
+    parents: NDArray[np.int64],
+    bind: NDArray[np.float64],
+    weights_used: NDArray[np.bool_],
+    tol: float,
+    labels: Sequence[int | None] | None = None,
+) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
     """The skinrs skeleton seen in glTF joint nodes: ``(C, BE, P, column_joint)``.
 
     A joint with children at other points gives one bone per distinct child point (head at the
@@ -89,7 +128,7 @@ def handles_of_rig(parents, bind, weights_used, tol, labels=None):
     joints are numbered in order of first appearance (point handles, then bones' heads, tails).
     """
     pos = bind[:, :3, 3]
-    points: list[np.ndarray] = []
+    points: list[NDArray[np.float64]] = []
     point_nodes: list[list[int]] = []
 
     def point(node: int) -> int:
@@ -102,7 +141,7 @@ def handles_of_rig(parents, bind, weights_used, tol, labels=None):
         return len(points) - 1
 
     segments: list[tuple[int, int]] = []  # (driving joint, a child node at the tail)
-    handles = []
+    handles: list[int] = []
     for j in range(len(parents)):
         tails: list[int] = []
         for c in np.flatnonzero(parents == j):
@@ -124,22 +163,29 @@ def handles_of_rig(parents, bind, weights_used, tol, labels=None):
     return C, BE, P, column_joint
 
 
-def _joint_numbers(labels, point_nodes):
+def _joint_numbers(
+    labels: Sequence[int | None] | None, point_nodes: list[list[int]]
+) -> NDArray[np.int64] | None:
     """Number of each point from the nodes' labels, or None unless every point has one label
     and together they are ``0 .. len - 1``."""
-    if labels is None or any(x is None for x in labels):
+    if labels is None:
         return None
-    order = []
+    known = [x for x in labels if x is not None]
+    if len(known) != len(labels):
+        return None
+    numbers = []
     for nodes in point_nodes:
-        own = {int(labels[n]) for n in nodes}
+        own = {int(known[n]) for n in nodes}
         if len(own) != 1:
             return None
-        order.append(own.pop())
-    order = np.array(order, dtype=np.int64)
+        numbers.append(own.pop())
+    order = np.array(numbers, dtype=np.int64)
     return order if np.array_equal(np.sort(order), np.arange(len(order))) else None
 
 
-def decompose(M: np.ndarray, what: str):
+def decompose(
+    M: NDArray[np.float64], what: str
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """``(translation, rotation xyzw, scale)`` of an affine 4x4 matrix; shear raises."""
     A = M[:3, :3]
     s = np.linalg.norm(A, axis=0)
@@ -150,10 +196,11 @@ def decompose(M: np.ndarray, what: str):
     R = A / s
     if np.abs(R.T @ R - np.eye(3)).max() > 1e-5:
         raise ValueError(f"{what} has a shear, which a glTF node cannot hold")
-    return M[:3, 3].copy(), _rotation().from_matrix(R).as_quat(), s
+    q: NDArray[np.float64] = _rotation().from_matrix(R).as_quat()
+    return M[:3, 3].copy(), q, s
 
 
-def local_matrices(parents, world):
+def local_matrices(parents: NDArray[np.int64], world: NDArray[np.float64]) -> NDArray[np.float64]:
     """Node matrices relative to their parents (``world`` (J, 4, 4) -> (J, 4, 4))."""
     L = world.copy()
     has = parents >= 0
@@ -161,24 +208,30 @@ def local_matrices(parents, world):
     return L
 
 
-def world_matrices(parents, local):
+def world_matrices(parents: NDArray[np.int64], local: NDArray[np.float64]) -> NDArray[np.float64]:
     """World matrices from parent-relative ones (parents listed before or after children)."""
     W = np.empty_like(local)
     done = np.zeros(len(parents), dtype=bool)
 
-    def visit(j):
+    def visit(j: int) -> NDArray[np.float64]:
         if not done[j]:
             p = parents[j]
             W[j] = local[j] if p < 0 else visit(p) @ local[j]
             done[j] = True
-        return W[j]
+        world: NDArray[np.float64] = W[j]
+        return world
 
     for j in range(len(parents)):
         visit(j)
     return W
 
 
-def joint_poses(T_columns, column_joint, parents, bind):
+def joint_poses(
+    T_columns: NDArray[np.float64],
+    column_joint: NDArray[np.int64],
+    parents: NDArray[np.int64],
+    bind: NDArray[np.float64],
+) -> NDArray[np.float64]:
     """Skinning transforms of every joint from those of the handle columns (f, J, 3, 4).
 
     A joint that drives no column (an end joint) follows its parent rigidly.
@@ -193,24 +246,26 @@ def joint_poses(T_columns, column_joint, parents, bind):
     return out[..., :3, :]
 
 
-def sample(interp: str, times, values, t):
+def sample(
+    interp: str, times: ArrayLike, values: NDArray[np.float64], t: NDArray[np.float64]
+) -> NDArray[np.float64]:
     """glTF animation sampler at times ``t``: STEP, LINEAR (slerp for unit quaternions) or
     CUBICSPLINE (``values`` holds in-tangent, value, out-tangent per key)."""
-    times = np.asarray(times, dtype=np.float64)
+    key_times = np.asarray(times, dtype=np.float64)
     quat = values.shape[-1] == 4
     if interp == "CUBICSPLINE":
-        values = values.reshape(len(times), 3, -1)
-    i = np.clip(np.searchsorted(times, t, side="right") - 1, 0, len(times) - 1)
-    i1 = np.minimum(i + 1, len(times) - 1)
-    dt = np.where(i1 > i, times[i1] - times[i], 1.0)
-    u = np.clip((t - times[i]) / dt, 0.0, 1.0)[:, None]
+        values = values.reshape(len(key_times), 3, -1)
+    i = np.clip(np.searchsorted(key_times, t, side="right") - 1, 0, len(key_times) - 1)
+    i1 = np.minimum(i + 1, len(key_times) - 1)
+    dt = np.where(i1 > i, key_times[i1] - key_times[i], 1.0)
+    u = np.clip((t - key_times[i]) / dt, 0.0, 1.0)[:, None]
     if interp == "STEP":
         return values[i] if values.ndim == 2 else values[i, 1]
     if interp == "CUBICSPLINE":
         p0, m0 = values[i, 1], values[i, 2] * dt[:, None]
         p1, m1 = values[i1, 1], values[i1, 0] * dt[:, None]
         u2, u3 = u * u, u * u * u
-        v = (2 * u3 - 3 * u2 + 1) * p0 + (u3 - 2 * u2 + u) * m0
+        v: NDArray[np.float64] = (2 * u3 - 3 * u2 + 1) * p0 + (u3 - 2 * u2 + u) * m0
         v += (-2 * u3 + 3 * u2) * p1 + (u3 - u2) * m1
         return v / np.linalg.norm(v, axis=1, keepdims=True) if quat else v
     if quat:
@@ -221,9 +276,11 @@ def sample(interp: str, times, values, t):
             key = _rotation().from_quat(np.stack([q0[r], q1[r]]))
             out[r] = _slerp(key, float(u[r, 0]))
         return out
-    return (1 - u) * values[i] + u * values[i1]
+    lerp: NDArray[np.float64] = (1 - u) * values[i] + u * values[i1]
+    return lerp
 
 
-def _slerp(key, u: float) -> np.ndarray:
+def _slerp(key: Rotation, u: float) -> NDArray[np.float64]:
     rel = key[0].inv() * key[1]
-    return (key[0] * _rotation().from_rotvec(rel.as_rotvec() * u)).as_quat()
+    q: NDArray[np.float64] = (key[0] * _rotation().from_rotvec(rel.as_rotvec() * u)).as_quat()
+    return q

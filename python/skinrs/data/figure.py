@@ -16,6 +16,7 @@ Example
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import NDArray
 
 # (center, half extents) of the boxes: torso, head, arms, legs, and a hat that lacks its bottom
 BOXES = [
@@ -32,7 +33,13 @@ OPEN_BOX = 6  # the hat: its bottom face is missing
 FACES = [(0, -1), (0, 1), (1, -1), (1, 1), (2, -1), (2, 1)]
 
 
-def _face_grid(center, half, axis, sign, n):
+def _face_grid(
+    center: tuple[float, float, float],
+    half: tuple[float, float, float],
+    axis: int,
+    sign: int,
+    n: int,
+) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
     """(n+1)^2 vertices and n^2 outward quads of one box face, the face's own vertices."""
     u, v = (axis + 1) % 3, (axis + 2) % 3  # u x v = +axis
     if sign < 0:
@@ -48,12 +55,13 @@ def _face_grid(center, half, axis, sign, n):
     return P + np.asarray(center), Q
 
 
-def box_figure_soup(n: int = 3):
+def box_figure_soup(n: int = 3) -> tuple[NDArray[np.float64], list[NDArray[np.int64]]]:
     """``V (m, 3)`` and a list of polygons (0-based index arrays, 3 or 4 corners).
 
     Every ``5``-th quad is split into two triangles, so the soup mixes quads and triangles.
     """
-    V, polys = [], []
+    V: list[NDArray[np.float64]] = []
+    polys: list[NDArray[np.int64]] = []
     for b, (c, h) in enumerate(BOXES):
         for axis, sign in FACES:
             if b == OPEN_BOX and (axis, sign) == (1, -1):
@@ -87,7 +95,7 @@ JOINTS = [
 ]
 
 
-def figure_skeleton():
+def figure_skeleton() -> tuple[list[str], NDArray[np.float64], NDArray[np.int64]]:
     """``names``, ``C (12, 3)`` and ``BE (11, 2)`` (parent -> child) of the figure's rig."""
     names = [j[0] for j in JOINTS]
     ix = {n: i for i, n in enumerate(names)}
@@ -96,7 +104,11 @@ def figure_skeleton():
     return names, C, BE
 
 
-def box_figure(n: int = 3):
+def box_figure(
+    n: int = 3,
+) -> tuple[
+    NDArray[np.float64], list[NDArray[np.int64]], list[str], NDArray[np.float64], NDArray[np.int64]
+]:
     """``(V, polygons, names, C, BE)``: the soup (``V (m, 3)``, a list of 0-based index arrays of
     3 or 4 corners, outward) and its skeleton (joint names, ``C (12, 3)``, ``BE (11, 2)`` parent
     -> child). ``n`` is the number of quads along each box face's side."""
