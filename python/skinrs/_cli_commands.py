@@ -2,15 +2,20 @@
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import time
+from typing import TYPE_CHECKING, TypedDict
 
 import numpy as np
+from numpy.typing import NDArray
 
 from ._cli_io import (
     WEIGHT_EXTS,
+    MeshFile,
     Progress,
+    Skeleton,
     UsageError,
     _ext,
     atomic_output,
@@ -22,18 +27,77 @@ from ._cli_io import (
     write_weights,
 )
 
+if TYPE_CHECKING:
+    from typing_extensions import NotRequired
+
+    from ._reduce_poses import Packed
+    from .gltf_read import GltfAsset
+
+# coordinates and weights; indices
+Floats = NDArray[np.float64]
+Ints = NDArray[np.int64]
+
+# The commands, and the file and progress helpers of _cli_io that skinrs.cli re-exports.
+__all__ = [
+    "WEIGHT_EXTS",
+    "Progress",
+    "UsageError",
+    "_example_poses",
+    "_ext",
+    "_pose_transforms",
+    "_reduce_all_rows",
+    "_solve_weights",
+    "_write_weights_output",
+    "atomic_output",
+    "cmd_batch",
+    "cmd_info",
+    "cmd_pose",
+    "cmd_reduce",
+    "cmd_weights",
+    "gap_progress",
+    "io_unpack",
+    "read_any_mesh",
+    "read_skeleton",
+    "read_weights",
+    "say",
+    "weights_job",
+    "write_weights",
+]
+
+
+class SolveInfo(TypedDict):
+    """BBW's final relative ``gap`` and ``energy`` (None for a field), and the number of
+    ``volume_vertices`` when the inside of a surface was meshed."""
+
+    gap: float | None
+    energy: float | None
+    volume_vertices: NotRequired[int]
+
+
+class WeightsJob(SolveInfo):
+    """What :func:`weights_job` did: the ``mesh`` it read, the weights ``W``, the skeleton and
+    the ``seconds`` of the solve."""
+
+    mesh: MeshFile
+    W: Floats
+    C: Floats
+    BE: Ints
+    P: Ints
+    seconds: float
+
+
 # --------------------------------------------------------------------------------------------
 # commands
 
 
-def cmd_weights(args) -> None:
+def cmd_weights(args: argparse.Namespace) -> None:
     job = weights_job(args)
     W = job["W"]
     say(args, f"weights: {W.shape[0]} vertices x {W.shape[1]} handles, {job['seconds']:.1f} s")
     say(args, f"wrote {args.output}")
 
 
-def weights_job(args) -> dict:
+def weights_job(args: argparse.Namespace) -> WeightsJob:
     """All of ``skinrs weights`` but the messages (``skinrs batch`` runs it per asset): reads,
     solves, writes ``args.output`` atomically; returns ``mesh``, ``W``, ``C``, ``BE``, ``P``,
     ``seconds`` (the solve), ``gap`` and ``energy`` (None where the method reports none)."""
@@ -53,28 +117,32 @@ def weights_job(args) -> dict:
     if mesh["F"] is None and args.method == "bbw":
         raise UsageError(f"{args.mesh}: a point cloud has no faces; use --method field")
     t0 = time.perf_counter()
-    info = {"gap": None, "energy": None}
+    info: SolveInfo = {"gap": None, "energy": None}
     W = _solve_weights(args, mesh, C, BE, P, info)
     seconds = time.perf_counter() - t0
     _write_weights_output(args, mesh, W, C, BE, P)
-    return dict(info, mesh=mesh, W=W, C=C, BE=BE, P=P, seconds=seconds)
+    return {**info, "mesh": mesh, "W": W, "C": C, "BE": BE, "P": P, "seconds": seconds}
 
 
-def _solve_weights(args, mesh, C, BE, P, info):
+def _solve_weights(
+    args: argparse.Namespace, mesh: MeshFile, C: Floats, BE: Ints, P: Ints, info: SolveInfo
+) -> Floats:
     """BBW (on the tet mesh, or meshing a surface's inside) or a geometric field's weights;
     ``info`` gets BBW's final relative ``gap`` and ``energy`` (None for the field)."""
     V, F = mesh["V"], mesh["F"]
     if args.method == "field":
         from .field import GeometricField
 
-        opts = {} if args.steps is None else {"steps": args.steps}
-        fld = GeometricField(V, F, C, BE=BE if len(BE) else None, P=P if len(P) else None, **opts)
+        fld = GeometricField(
+            V, F, C, BE=BE if len(BE) else None, P=P if len(P) else None, steps=args.steps
+        )
         prog = Progress(args.quiet, args.steps or 6000, "step", lambda it, v: it)
         try:
             fld.optimize(callback=prog)
         finally:
             prog.close()
         return fld.vertex_weights()
+    W: Floats
     tol = args.tol if args.tol is not None else 1e-6
     prog = Progress(args.quiet, 100.0, "%", gap_progress(tol))
     try:
@@ -83,21 +151,22 @@ def _solve_weights(args, mesh, C, BE, P, info):
 
             W, res = bbw_dual(V, mesh["T"], C, BE=BE, P=P, tol=tol, callback=prog,
                               return_info=True)  # fmt: skip
-            info.update(gap=res["relative_gap"], energy=res["energy"])
+            info["gap"], info["energy"] = res["relative_gap"], res["energy"]
             return W
         from .meshing import skin_weights
 
         say(args, "meshing the inside with the skeleton (TetGen) ...")
         W, res = skin_weights(V, F, C, BE, P, tol=tol, callback=prog, return_info=True)
-        info.update(
-            gap=res["relative_gap"], energy=res["energy"], volume_vertices=res["volume_vertices"]
-        )
+        info["gap"], info["energy"] = res["relative_gap"], res["energy"]
+        info["volume_vertices"] = res["volume_vertices"]
         return W
     finally:
         prog.close()
 
 
-def _write_weights_output(args, mesh, W, C, BE, P):
+def _write_weights_output(
+    args: argparse.Namespace, mesh: MeshFile, W: Floats, C: Floats, BE: Ints, P: Ints
+) -> None:
     """A skinned glTF asset, or the weights (reduced to -k influences when asked)."""
     V, F = mesh["V"], mesh["F"]
     if _ext(args.output) in (".glb", ".gltf"):
@@ -118,7 +187,9 @@ def _write_weights_output(args, mesh, W, C, BE, P):
         write_weights(args.output, W)
 
 
-def _reduce_all_rows(args, mesh, W, C, BE, P):
+def _reduce_all_rows(
+    args: argparse.Namespace, mesh: MeshFile, W: Floats, C: Floats, BE: Ints, P: Ints
+) -> Packed:
     """``W`` reduced to ``-k`` influences. On a tet mesh the surface rows get the chosen method
     (smooth and Poisson work on the boundary triangles) and the interior rows, which no
     triangle uses, keep their k largest weights."""
@@ -128,7 +199,7 @@ def _reduce_all_rows(args, mesh, W, C, BE, P):
     k = min(args.influences, W.shape[1])
     method = args.reduce_method
     poses = _example_poses(method, C, BE, P)
-    if mesh["T"] is None or method not in ("smooth", "poisson"):
+    if mesh["T"] is None or F is None or method not in ("smooth", "poisson"):
         F_used = F if method in ("smooth", "poisson") else None
         return reduce_weights(W, k, method=method, V=V, F=F_used, bone_transforms=poses)
     surface = np.unique(F)
@@ -139,13 +210,14 @@ def _reduce_all_rows(args, mesh, W, C, BE, P):
     return idx, wts
 
 
-def io_unpack(packed, m):
+def io_unpack(packed: Packed, m: int) -> Floats:
     from .reduce import unpack_weights
 
-    return unpack_weights(packed[0], packed[1], m)
+    W: Floats = unpack_weights(packed[0], packed[1], m)  # dense: sparse=False
+    return W
 
 
-def _example_poses(method, C, BE, P):
+def _example_poses(method: str, C: Floats, BE: Ints, P: Ints) -> Floats | None:
     if method not in ("geometric", "poisson"):
         return None
     if len(P):
@@ -155,24 +227,26 @@ def _example_poses(method, C, BE, P):
     return random_skeleton_poses(C, BE, 8, seed=0)
 
 
-def cmd_reduce(args) -> None:
+def cmd_reduce(args: argparse.Namespace) -> None:
     from .reduce import reduce_weights
 
     W = read_weights(args.weights)
-    V = F = C = BE = None
+    V: Floats | None = None
+    F: Ints | None = None
+    skeleton: Skeleton | None = None
     if args.mesh is not None:
         m = read_any_mesh(args.mesh)
         V, F = m["V"], m["F"]
     if args.skeleton is not None:
-        C, BE, P = read_skeleton(args.skeleton)
+        skeleton = read_skeleton(args.skeleton)
     needs = {"smooth": ("--mesh",), "geometric": ("--mesh", "--skeleton"),
              "poisson": ("--mesh", "--skeleton")}.get(args.method, ())  # fmt: skip
-    missing = [o for o in needs if (V if o == "--mesh" else C) is None]
+    missing = [o for o in needs if (V if o == "--mesh" else skeleton) is None]
     if missing:
         raise UsageError(
             f"--method {args.method} needs {' and '.join(missing)} (or use --method k-largest)"
         )
-    poses = _example_poses(args.method, C, BE, P) if C is not None else None
+    poses = _example_poses(args.method, *skeleton) if skeleton is not None else None
     prog = Progress(args.quiet, None, "sweep", lambda it, v: it)
     try:
         I, A = reduce_weights(W, args.k, method=args.method, V=V, F=F, bone_transforms=poses,
@@ -183,7 +257,7 @@ def cmd_reduce(args) -> None:
     say(args, f"wrote {args.output}: {args.k} influences per vertex ({args.method})")
 
 
-def _pose_transforms(args, asset):
+def _pose_transforms(args: argparse.Namespace, asset: GltfAsset) -> Floats:
     """Per-column transforms (m, 3, 4) for ``skinrs pose``."""
     from .reduce import random_skeleton_poses
     from .skinning import forward_kinematics, quaternions_from_xyzw
@@ -200,7 +274,8 @@ def _pose_transforms(args, asset):
             i = int(val) if val.lstrip("-").isdigit() else None
             if i is None or not -len(T) <= i < len(T):
                 raise UsageError(f"--pose {spec}: the animation has frames 0..{len(T) - 1}")
-            return T[i]
+            frame: Floats = T[i]
+            return frame
         seed = int(val) if val.isdigit() else 0
         bones = random_skeleton_poses(C, BE, 1, seed=seed)[0]
     else:
@@ -213,10 +288,11 @@ def _pose_transforms(args, asset):
     if bones.shape != (len(BE), 3, 4):
         raise UsageError(f"--pose {spec}: expected {len(BE)} bones, got shape {bones.shape}")
     ident = np.broadcast_to(np.hstack([np.eye(3), np.zeros((3, 1))]), (nP, 3, 4))
-    return np.concatenate([ident, bones])
+    transforms: Floats = np.concatenate([ident, bones])
+    return transforms
 
 
-def cmd_pose(args) -> None:
+def cmd_pose(args: argparse.Namespace) -> None:
     from .plot import _plt
     from .skinning import dqs, lbs
 
@@ -244,7 +320,7 @@ def cmd_pose(args) -> None:
     say(args, f"wrote {args.output}")
 
 
-def cmd_batch(args) -> int:
+def cmd_batch(args: argparse.Namespace) -> int:
     from . import batch
 
     opts = {k: getattr(args, k) for k in batch.OPTION_DEFAULTS}
@@ -256,17 +332,21 @@ def cmd_batch(args) -> int:
     return 1 if report["summary"]["failed"] else 0
 
 
-def cmd_info(args) -> None:
+def cmd_info(args: argparse.Namespace) -> None:
     mesh = read_any_mesh(args.file)
     V, F, asset = mesh["V"], mesh["F"], mesh["asset"]
-    info = {"file": args.file, "vertices": len(V), "faces": 0 if F is None else len(F)}
+    info: dict[str, object] = {
+        "file": args.file,
+        "vertices": len(V),
+        "faces": 0 if F is None else len(F),
+    }
     if mesh["T"] is not None:
         info["tets"] = len(mesh["T"])
     if F is not None:
         import trimesh
 
         info["watertight"] = bool(trimesh.Trimesh(V, F, process=False).is_watertight)
-    skel = None
+    skel: Skeleton | None = None
     if args.skeleton is not None:
         skel = read_skeleton(args.skeleton)
     elif asset is not None and len(asset["C"]):

@@ -23,10 +23,25 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, Literal, TypedDict
 
-from .cli import MESH_EXTS, UsageError, _ext
+from ._cli_io import MESH_EXTS, UsageError, _ext
 
-OPTION_DEFAULTS = {
+if TYPE_CHECKING:
+    from distributed import Future
+    from tqdm import tqdm
+    from typing_extensions import Self
+
+    from ._cli_commands import WeightsJob
+
+#: The options of ``skinrs weights`` by name, as the command line, a .csv or a .jsonl manifest
+#: give them (str, float, int or None).
+Options = dict[str, Any]
+#: A JSON object: an asset's record (``NAME.json``) or what a result depends on.
+Record = dict[str, Any]
+
+OPTION_DEFAULTS: Options = {
     "method": "bbw",
     "tol": None,
     "steps": None,
@@ -42,11 +57,39 @@ TEST_HOOK_ENV = "SKINRS_BATCH_TEST_HOOKS"
 TEST_HOOK_KEY = "crash_worker_for_testing"
 
 
+class AssetSpec(TypedDict):
+    """One asset: its ``name`` (of its output files), ``mesh`` and ``skeleton`` paths and its
+    own ``options`` (a manifest row's overrides)."""
+
+    name: str
+    mesh: str
+    skeleton: str | None
+    options: Options
+
+
+class Summary(TypedDict):
+    """The counts of a batch run and its wall-clock ``seconds``."""
+
+    assets: int
+    done: int
+    failed: int
+    skipped: int
+    failed_total: int
+    seconds: float
+
+
+class Report(TypedDict):
+    """What :func:`run` returns (also ``report.json``): the ``summary`` and a record per asset."""
+
+    summary: Summary
+    records: list[Record]
+
+
 # --------------------------------------------------------------------------------------------
 # assets
 
 
-def find_assets(source) -> list[dict]:
+def find_assets(source: str | os.PathLike[str]) -> list[AssetSpec]:
     """Asset specs ``dict(name, mesh, skeleton, options)`` from a directory or a manifest.
 
     A directory is searched recursively: a mesh file with a skeleton of the same stem
@@ -57,6 +100,7 @@ def find_assets(source) -> list[dict]:
     relative paths are relative to the manifest.
     """
     source = os.path.abspath(str(source))
+    rows: list[dict[str, Any]]
     if os.path.isdir(source):
         rows = _scan_directory(source)
     elif _ext(source) == ".csv":
@@ -68,7 +112,8 @@ def find_assets(source) -> list[dict]:
     else:
         raise UsageError(f"{source}: not a directory, .csv or .jsonl manifest")
     base = source if os.path.isdir(source) else os.path.dirname(source)
-    specs, seen = [], set()
+    specs: list[AssetSpec] = []
+    seen: set[str] = set()
     for i, row in enumerate(rows):
         if "mesh" not in row:
             raise UsageError(f"{source}: row {i + 1} has no 'mesh'")
@@ -89,8 +134,8 @@ def find_assets(source) -> list[dict]:
     return specs
 
 
-def _scan_directory(root) -> list[dict]:
-    rows = []
+def _scan_directory(root: str) -> list[dict[str, Any]]:
+    rows: list[dict[str, Any]] = []
     for d, dirs, files in os.walk(root):
         dirs.sort()
         names = set(files)
@@ -109,13 +154,13 @@ def _scan_directory(root) -> list[dict]:
     return rows
 
 
-def _default_name(base, mesh) -> str:
+def _default_name(base: str, mesh: str) -> str:
     rel = os.path.relpath(mesh, base)
     stem = os.path.splitext(rel)[0] if not rel.startswith("..") else os.path.basename(mesh)
     return stem.replace(os.sep, "--")
 
 
-def _options(spec, common) -> dict:
+def _options(spec: AssetSpec, common: Options) -> Options:
     opts = dict(OPTION_DEFAULTS)
     opts.update({k: v for k, v in common.items() if v is not None})
     opts.update(spec["options"])
@@ -128,7 +173,7 @@ def _options(spec, common) -> dict:
     return opts
 
 
-def _sha256(path) -> str | None:
+def _sha256(path: str | None) -> str | None:
     if path is None or not os.path.isfile(path):
         return None
     h = hashlib.sha256()
@@ -138,7 +183,7 @@ def _sha256(path) -> str | None:
     return h.hexdigest()
 
 
-def _key(spec, opts) -> dict:
+def _key(spec: AssetSpec, opts: Options) -> Record:
     """What a result depends on: the inputs' contents, the options and skinrs' version."""
     from . import __version__
 
@@ -166,7 +211,7 @@ def estimate_peak_bytes(n_vertices: int, n_handles: int, tets: bool, method: str
     return int(400e6 + n_volume * (16 * 8 * max(n_handles, 1) + 3000))
 
 
-def _write_json(path, obj) -> None:
+def _write_json(path: str, obj: object) -> None:
     d = os.path.dirname(path)
     fd, tmp = tempfile.mkstemp(prefix=".skinrs-", suffix=".json", dir=d)
     try:
@@ -183,31 +228,31 @@ class _Watch:
     be interrupted from another thread, and Dask restarts the worker (its failed record is
     written first)."""
 
-    def __init__(self, timeout, on_timeout):
+    def __init__(self, timeout: float | None, on_timeout: Callable[[], None]) -> None:
         import psutil
 
         self.proc, self.peak, self.stop = psutil.Process(), 0, threading.Event()
         self.timeout, self.on_timeout, self.t0 = timeout, on_timeout, time.monotonic()
         self.thread = threading.Thread(target=self._loop, daemon=True)
 
-    def _loop(self):
+    def _loop(self) -> None:
         while not self.stop.wait(0.05):
             self.peak = max(self.peak, self.proc.memory_info().rss)
             if self.timeout and time.monotonic() - self.t0 > self.timeout:
                 self.on_timeout()
                 os._exit(3)
 
-    def __enter__(self):
+    def __enter__(self) -> Self:
         self.peak = self.proc.memory_info().rss
         self.thread.start()
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc: object) -> None:
         self.stop.set()
         self.thread.join()
 
 
-def _worker_memory_limit():
+def _worker_memory_limit() -> int | None:
     try:
         from distributed import get_worker
 
@@ -216,15 +261,22 @@ def _worker_memory_limit():
         return None
 
 
-def run_asset(spec, opts, key, outdir, timeout=None, memory_limit="worker") -> dict:
+def run_asset(
+    spec: AssetSpec,
+    opts: Options,
+    key: Record,
+    outdir: str,
+    timeout: float | None = None,
+    memory_limit: float | Literal["worker"] | None = "worker",
+) -> Record:
     """Weights of one asset into ``outdir`` (``NAME.EXT`` and ``NAME.json``, both atomic);
     returns the record. Bad input gives a failed record; other errors raise (Dask retries)."""
-    from . import cli
+    from . import _cli_commands as cli
 
     name = spec["name"]
     out = os.path.join(outdir, f"{name}.{opts['format']}")
     rec_path = os.path.join(outdir, f"{name}.json")
-    rec = {"name": name, "mesh": spec["mesh"], "skeleton": spec["skeleton"], **key,
+    rec: Record = {"name": name, "mesh": spec["mesh"], "skeleton": spec["skeleton"], **key,
            "output": os.path.basename(out), "started": time.time()}  # fmt: skip
     if spec["options"].get(TEST_HOOK_KEY):
         if os.environ.get(TEST_HOOK_ENV) != "1":
@@ -232,7 +284,7 @@ def run_asset(spec, opts, key, outdir, timeout=None, memory_limit="worker") -> d
         os._exit(11)
     limit = _worker_memory_limit() if memory_limit == "worker" else memory_limit
 
-    def failed(reason):
+    def failed(reason: str) -> Record:
         rec.update(status="failed", reason=reason, seconds=time.time() - rec["started"])
         _write_json(rec_path, rec)
         return rec
@@ -248,7 +300,7 @@ def run_asset(spec, opts, key, outdir, timeout=None, memory_limit="worker") -> d
                 return failed(f"needs about {need / 1e9:.2f} GB, more than the worker's memory "
                               f"limit of {limit / 1e9:.2f} GB")  # fmt: skip
 
-        def on_timeout():
+        def on_timeout() -> None:
             failed(f"timed out after {timeout:g} s (worker restarted)")
 
         with _Watch(timeout, on_timeout) as watch:
@@ -265,7 +317,7 @@ def run_asset(spec, opts, key, outdir, timeout=None, memory_limit="worker") -> d
     return rec
 
 
-def _thumbnail(job, outdir, name):
+def _thumbnail(job: WeightsJob, outdir: str, name: str) -> str | None:
     """``thumbs/NAME.png``: the weights of the handle with the most weight (skinrs.plot)."""
     F, mesh = job["mesh"]["F"], job["mesh"]
     if F is None:
@@ -293,11 +345,11 @@ def _thumbnail(job, outdir, name):
 # the driver
 
 
-def _up_to_date(rec_path, key, outdir, retry_failed) -> dict | None:
+def _up_to_date(rec_path: str, key: Record, outdir: str, retry_failed: bool) -> Record | None:
     """The stored record when it matches ``key`` (and its output is intact), else None."""
     try:
         with open(rec_path) as fh:
-            rec = json.load(fh)
+            rec: Record = json.load(fh)
     except (OSError, ValueError):
         return None
     if any(rec.get(k) != v for k, v in key.items()):
@@ -308,15 +360,26 @@ def _up_to_date(rec_path, key, outdir, retry_failed) -> dict | None:
     return rec if rec.get("status") == "done" and _sha256(out) == rec.get("output_sha256") else None
 
 
-def _cluster_config(retries):
+def _cluster_config(retries: int) -> dict[str, float]:
     # allowed-failures: how often a task may be on a worker that dies before it is given up;
     # worker-saturation 1.0: a worker holds only the task it runs, so a crash blames no other.
     return {"distributed.scheduler.allowed-failures": retries,
             "distributed.scheduler.worker-saturation": 1.0}  # fmt: skip
 
 
-def run(source, outdir, *, scheduler=None, n_workers=None, memory_limit="auto", retries=1,
-        timeout=None, retry_failed=False, progress=True, **options) -> dict:  # fmt: skip
+def run(
+    source: str | os.PathLike[str],
+    outdir: str | os.PathLike[str],
+    *,
+    scheduler: str | None = None,
+    n_workers: int | None = None,
+    memory_limit: str | float | None = "auto",
+    retries: int = 1,
+    timeout: float | None = None,
+    retry_failed: bool = False,
+    progress: bool = True,
+    **options: Any,
+) -> Report:
     """Weights of every asset of ``source`` (directory or manifest) into ``outdir`` on Dask.
 
     Parameters
@@ -344,7 +407,8 @@ def run(source, outdir, *, scheduler=None, n_workers=None, memory_limit="auto", 
     outdir = os.path.abspath(str(outdir))
     os.makedirs(outdir, exist_ok=True)
     specs = find_assets(source)
-    records, todo = {}, []
+    records: dict[str, Record] = {}
+    todo: list[tuple[AssetSpec, Options, Record]] = []
     for spec in specs:
         opts = _options(spec, options)
         key = _key(spec, opts)
@@ -354,7 +418,8 @@ def run(source, outdir, *, scheduler=None, n_workers=None, memory_limit="auto", 
         else:
             todo.append((spec, opts, key))
     bar = _bar(progress, len(specs), len(records))
-    cluster = client = None
+    cluster: LocalCluster | None = None
+    client: Client | None = None
     try:
         with dask.config.set(_cluster_config(retries)):
             if todo and scheduler is None:
@@ -363,7 +428,8 @@ def run(source, outdir, *, scheduler=None, n_workers=None, memory_limit="auto", 
                                        dashboard_address=None)  # fmt: skip
             if todo:
                 client = Client(scheduler or cluster)
-                futures, submitted = {}, time.time()
+                futures: dict[Future[Record], tuple[AssetSpec, Record]] = {}
+                submitted = time.time()
                 for spec, opts, key in todo:
                     fut = client.submit(run_asset, spec, opts, key, outdir, timeout, pure=False,
                                         retries=retries, key=f"skinrs-{spec['name']}-{time.time()}")  # fmt: skip
@@ -390,7 +456,7 @@ def run(source, outdir, *, scheduler=None, n_workers=None, memory_limit="auto", 
     return write_report(outdir, ordered, time.time() - t0)
 
 
-def _result(res, spec, key, outdir, submitted) -> dict:
+def _result(res: object, spec: AssetSpec, key: Record, outdir: str, submitted: float) -> Record:
     """A finished task's record; a task given up by Dask gets a failed record here."""
     rec_path = os.path.join(outdir, spec["name"] + ".json")
     if isinstance(res, dict):
@@ -401,12 +467,12 @@ def _result(res, spec, key, outdir, submitted) -> dict:
         reason = "its worker process died on every attempt (crash, out of memory or killed)"
         try:  # a timeout writes its own reason before it ends the process
             with open(rec_path) as fh:
-                old = json.load(fh)
+                old: Record = json.load(fh)
             if old.get("started", 0) >= submitted and "timed out" in old.get("reason", ""):
                 return dict(old)  # (the last attempt's record, with its time)
         except (OSError, ValueError):
             pass
-    rec = {"name": spec["name"], "mesh": spec["mesh"], "skeleton": spec["skeleton"], **key,
+    rec: Record = {"name": spec["name"], "mesh": spec["mesh"], "skeleton": spec["skeleton"], **key,
            "status": "failed", "reason": reason, "started": time.time()}  # fmt: skip
     _write_json(rec_path, rec)
     return rec
@@ -415,8 +481,9 @@ def _result(res, spec, key, outdir, submitted) -> dict:
 class _bar:
     """A tqdm bar over assets (a line per asset without tqdm, nothing with progress=False)."""
 
-    def __init__(self, on, total, skipped):
-        self.on, self.tqdm = on, None
+    def __init__(self, on: bool, total: int, skipped: int) -> None:
+        self.on = on
+        self.tqdm: tqdm | None = None
         if on:
             try:
                 from tqdm import tqdm
@@ -425,14 +492,14 @@ class _bar:
             except ImportError:
                 pass
 
-    def __call__(self, name, status):
+    def __call__(self, name: str, status: str) -> None:
         if self.tqdm is not None:
             self.tqdm.set_postfix_str(f"{name}: {status}")
             self.tqdm.update(1)
         elif self.on:
             print(f"  {name}: {status}", file=sys.stderr)
 
-    def close(self):
+    def close(self) -> None:
         if self.tqdm is not None:
             self.tqdm.close()
             self.tqdm = None
@@ -442,15 +509,15 @@ class _bar:
 # reports
 
 
-def write_report(outdir, records, seconds) -> dict:
+def write_report(outdir: str, records: list[Record], seconds: float) -> Report:
     """``report.json`` and ``report.html`` in ``outdir``; returns the report."""
     done = [r for r in records if r["status"] == "done" and not r.get("skipped")]
     failed = [r for r in records if r["status"] == "failed" and not r.get("skipped")]
-    summary = {"assets": len(records), "done": len(done), "failed": len(failed),
+    summary: Summary = {"assets": len(records), "done": len(done), "failed": len(failed),
                "skipped": sum(bool(r.get("skipped")) for r in records),
                "failed_total": sum(r["status"] == "failed" for r in records),
                "seconds": seconds}  # fmt: skip
-    report = {"summary": summary, "records": records}
+    report: Report = {"summary": summary, "records": records}
     _write_json(os.path.join(outdir, "report.json"), report)
     fd, tmp = tempfile.mkstemp(prefix=".skinrs-", suffix=".html", dir=outdir)
     with os.fdopen(fd, "w") as fh:
@@ -459,7 +526,7 @@ def write_report(outdir, records, seconds) -> dict:
     return report
 
 
-def _html(summary, records) -> str:
+def _html(summary: Summary, records: list[Record]) -> str:
     e = html.escape
     rows = []
     for r in records:
@@ -471,7 +538,8 @@ def _html(summary, records) -> str:
         rows.append(f"<tr class={r['status']}><td>{e(r['name'])}</td><td>{status}</td>"
                     f"<td>{r.get('seconds', 0):.1f}</td><td>{gap}</td>"
                     f"<td>{r.get('peak_rss_mb', 0):.0f}</td><td>{what}</td><td>{img}</td></tr>")  # fmt: skip
-    head = ", ".join(f"{k} {v if k != 'seconds' else round(v, 1)}" for k, v in summary.items())
+    seconds = round(summary["seconds"], 1)
+    head = ", ".join(f"{k} {v if k != 'seconds' else seconds}" for k, v in summary.items())
     return ("<!doctype html><meta charset=utf-8><title>skinrs batch</title><style>"
             "td{padding:2px 8px;vertical-align:middle}.failed{background:#fdd}</style>"
             f"<h1>skinrs batch</h1><p>{e(head)}</p><table><tr><th>asset<th>status<th>s"
@@ -479,7 +547,7 @@ def _html(summary, records) -> str:
             + "\n".join(rows) + "</table>\n")  # fmt: skip
 
 
-def summary_table(report) -> str:
+def summary_table(report: Report) -> str:
     """The report as a plain-text table (one line per asset, then the totals)."""
     lines = [f"{'asset':<32} {'status':<8} {'s':>7}  output / reason"]
     for r in report["records"]:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Sequence
 
 from ._cli_commands import (  # noqa: F401 - re-exported
     WEIGHT_EXTS,
@@ -42,7 +43,7 @@ from ._cli_io import MESH_EXTS
 # parser
 
 
-def _add_weight_options(p) -> None:
+def _add_weight_options(p: argparse.ArgumentParser) -> None:
     """The options of ``skinrs weights`` (``skinrs batch`` takes the same)."""
     p.add_argument("--method", choices=("bbw", "field"), default="bbw",
                    help="bbw: tet-meshed BBW (default); field: mesh-free geometric field "
@@ -127,10 +128,10 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def main(argv=None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        rc = args.run(args)
+        rc: int | None = args.run(args)
     except KeyboardInterrupt:
         print("skinrs: interrupted", file=sys.stderr)
         return 130
