@@ -6,7 +6,7 @@ import sys
 NAMES = ("bbw", "field", "lbs", "reduce", "scale")
 
 
-def main(argv=None) -> int:
+def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if not argv or argv[0] not in NAMES:
         print(f"usage: python -m skinrs.bench {{{','.join(NAMES)}}} [options]", file=sys.stderr)

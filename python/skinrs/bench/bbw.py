@@ -23,9 +23,12 @@ from __future__ import annotations
 
 import argparse
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, ParamSpec, TypeVar
 
 import numpy as np
+from numpy.typing import NDArray
 
 from .. import bbw as _bbw
 from .. import bbw_dual_constrained, biharmonic_energy, biharmonic_matrix
@@ -33,15 +36,34 @@ from .. import bbw_dual_constrained, biharmonic_energy, biharmonic_matrix
 ROOT = Path(__file__).resolve().parents[3]
 FIXTURES = ROOT / "tests" / "reference"
 
+if TYPE_CHECKING:
+    import scipy.sparse as sp
 
-def _load(case):
+    from .._info import Info
+
+#: A reference fixture: its arrays by name (``V``, ``T``, ``b``, ``bc``, ``W_qp``, ``energy``).
+Fixture = dict[str, NDArray[Any]]
+#: One row of the table: method, time_s, iterations, energy, ... (None where not measured).
+Row = dict[str, Any]
+Args = ParamSpec("Args")
+Out = TypeVar("Out")
+
+
+def _load(case: str) -> Fixture:
     z = np.load(FIXTURES / f"{case}.npz")
     return {k: z[k] for k in z.files}
 
 
-def _row(name, seconds, W, B, f, iterations=None):
+def _row(
+    name: str,
+    seconds: float,
+    W: NDArray[np.float64],
+    B: sp.csc_matrix,
+    f: Fixture,
+    iterations: int | None = None,
+) -> Row:
     E = biharmonic_energy(W, B)
-    row = {"method": name, "time_s": seconds, "iterations": iterations, "energy": E}
+    row: Row = {"method": name, "time_s": seconds, "iterations": iterations, "energy": E}
     if "energy" in f:
         row["rel_energy"] = (E - float(f["energy"])) / float(f["energy"])
     if "W_qp" in f:
@@ -52,25 +74,27 @@ def _row(name, seconds, W, B, f, iterations=None):
 TARGET = 1e-6  # relative energy above the optimum that "reaches the same accuracy" means
 
 
-def _timed(fn, *args, **kwargs):
+def _timed(fn: Callable[Args, Out], *args: Args.args, **kwargs: Args.kwargs) -> tuple[float, Out]:
     t = time.perf_counter()
     out = fn(*args, **kwargs)
     return time.perf_counter() - t, out
 
 
-def run_case(case, slow=True, limit=900.0, repeat=1):
+def run_case(case: str, slow: bool = True, limit: float = 900.0, repeat: int = 1) -> list[Row]:
     from . import paper_reference
 
     f = _load(case)
     V, T, b, bc = f["V"], f["T"], f["b"], f["bc"]
     B = biharmonic_matrix(V, T)
 
-    def ours(solver, tol, seed=0):
+    def ours(solver: str, tol: float, seed: int = 0) -> tuple[NDArray[np.float64], Info]:
         return bbw_dual_constrained(
             V, T, b, bc, solver=solver, tol=tol, seed=seed, return_info=True
         )
 
-    def ours_row(solver, tol, times, out):
+    def ours_row(
+        solver: str, tol: float, times: list[float], out: tuple[NDArray[np.float64], Info]
+    ) -> Row:
         W, info = out
         row = _row(f"skinrs {solver} tol {tol:g}", float(np.median(times)), W, B, f,
                    info["iterations"])  # fmt: skip
@@ -84,7 +108,9 @@ def run_case(case, slow=True, limit=900.0, repeat=1):
     # on where the warm start from that random point stops (hand-403: 7-14 over seeds 0-6).
     # Their rows hold the median time and the results of seed 0; the speed-up line the ratio
     # of the medians and of each pair.
-    t_ours, t_ref, rounds = [], [], []
+    t_ours: list[float] = []
+    t_ref: list[float] = []
+    rounds: list[int] = []
     for seed in range(repeat):
         dt, out_k = _timed(ours, "active-set", 1e-6, seed)
         t_ours.append(dt)
@@ -149,11 +175,11 @@ def run_case(case, slow=True, limit=900.0, repeat=1):
     return rows
 
 
-def _fmt(x, spec):
+def _fmt(x: object, spec: str) -> str:
     return "-" if x is None or (isinstance(x, float) and np.isnan(x)) else format(x, spec)
 
 
-def print_table(case, rows):
+def print_table(case: str, rows: list[Row]) -> None:
     print(f"\n### {case}\n")
     print(
         "| method | time (s) | L-BFGS iterations | active-set rounds | energy | "
@@ -198,7 +224,7 @@ def print_table(case, rows):
                     )
 
 
-def main(argv=None) -> int:
+def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m skinrs.bench bbw", description=__doc__)
     ap.add_argument(
         "cases",

@@ -28,13 +28,21 @@ import argparse
 import os
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
+from numpy.typing import NDArray
+
+Out = TypeVar("Out")
+#: One timing window of the optimisation: points, seconds, rays, visibility's share of the time.
+Window = tuple[int, float, int, float]
 
 
-def _best(fn, repeat):
-    times, out = [], None
+def _best(fn: Callable[[], Out], repeat: int) -> tuple[float, Out]:
+    times: list[float] = []
+    out: Out
     for _ in range(repeat):
         t = time.perf_counter()
         out = fn()
@@ -42,7 +50,15 @@ def _best(fn, repeat):
     return min(times), out
 
 
-def _load_case(case):
+def _load_case(
+    case: str,
+) -> tuple[
+    NDArray[np.float64],
+    NDArray[np.int64],
+    NDArray[np.float64],
+    NDArray[np.int64],
+    NDArray[np.float64] | None,
+]:
     from skinrs import io
 
     data = Path(os.environ.get("SKINRS_DATA", "../shared/data"))
@@ -57,7 +73,7 @@ def _load_case(case):
     return V, F, C, BE, None
 
 
-def _optimize(args) -> int:
+def _optimize(args: argparse.Namespace) -> int:
     import skinrs
 
     V, F, C, BE, Wref = _load_case(args.case)
@@ -82,12 +98,13 @@ def _optimize(args) -> int:
     t = time.perf_counter()
     fld = skinrs.GeometricField(V, F, C, BE=BE, steps=4 * S * (1 if args.full else 2))
     t_setup = time.perf_counter() - t
-    total, rows = t_setup, []
+    total = t_setup
+    rows: list[tuple[int, list[Window]]] = []
     threads = os.cpu_count() or 1
     # Per level: a first window (the visibility cache of the pool fills up) and a second,
     # steady-state window; the rest of the level's 1500 steps costs like the second.
     for level in range(4):
-        row = [level]
+        windows: list[Window] = []
         for _ in range(1 if args.full else 2):
             before = fld.info()
             t = time.perf_counter()
@@ -97,20 +114,20 @@ def _optimize(args) -> int:
             rays = i["rays"] - before["rays"]
             tvis = i["time_visibility"] - before["time_visibility"]
             tenergy = i["time_energy"] - before["time_energy"]
-            row.append((i["n_points"], dt, rays, tvis / max(tenergy * threads, 1e-9)))
-        rows.append(row)
+            windows.append((i["n_points"], dt, rays, tvis / max(tenergy * threads, 1e-9)))
+        rows.append((level, windows))
         if args.full:
-            total += row[1][1]
+            total += windows[0][1]
         else:
-            total += row[1][1] + row[2][1] * (1500 - S) / S
+            total += windows[0][1] + windows[1][1] * (1500 - S) / S
     print(f"setup (pool of {fld.info()['pool']} samples, first points): {t_setup:.1f} s")
     print(
         f"{'level':>5}{'window':>8}{'points':>8}{'s/step':>9}{'rays':>11}{'rays/s':>10}{'vis':>6}"
     )
-    for row in rows:
-        for w, (n, dt, rays, share) in enumerate(row[1:]):
+    for level, windows in rows:
+        for w, (n, dt, rays, share) in enumerate(windows):
             print(
-                f"{row[0]:>5}{w:>8}{n:>8}{dt / S:>9.3f}{rays:>11}{rays / max(dt, 1e-9):>10.3g}"
+                f"{level:>5}{w:>8}{n:>8}{dt / S:>9.3f}{rays:>11}{rays / max(dt, 1e-9):>10.3g}"
                 f"{share:>6.0%}"
             )
     what = "measured" if args.full else f"extrapolated from 2 x {S} steps per level"
@@ -126,7 +143,7 @@ def _optimize(args) -> int:
     return 0
 
 
-def main(argv=None) -> int:
+def main(argv: list[str] | None = None) -> int:
     import igl
 
     import skinrs
@@ -157,7 +174,7 @@ def main(argv=None) -> int:
         f"best of {args.repeat}, {os.cpu_count()} cpus"
     )
 
-    rows = []
+    rows: list[tuple[str, float, float, float | None]] = []
     t_ex, w_ex = _best(lambda: igl.winding_number(V, F, Q), args.repeat)
     t_fi, w_fi = _best(lambda: igl.fast_winding_number(V, F, Q), args.repeat)
     t_s2, w_s2 = _best(lambda: skinrs.winding_number(V, F, Q), args.repeat)

@@ -27,12 +27,14 @@ from __future__ import annotations
 import argparse
 import os
 import time
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
+from numpy.typing import NDArray
 
 
-def _best(f, repeat: int) -> float:
+def _best(f: Callable[[], object], repeat: int) -> float:
     best = float("inf")
     for _ in range(repeat):
         t0 = time.perf_counter()
@@ -41,29 +43,60 @@ def _best(f, repeat: int) -> float:
     return best
 
 
-def _random_rigid(m: int, rng) -> np.ndarray:
+def _random_rigid(m: int, rng: np.random.Generator) -> NDArray[np.float64]:
     Q, _ = np.linalg.qr(rng.standard_normal((m, 3, 3)))
     Q *= np.sign(np.linalg.det(Q))[:, None, None]
     return np.concatenate([Q, rng.standard_normal((m, 3, 1))], axis=2)
 
 
-def numpy_einsum_lbs(V, W, T):
+def numpy_einsum_lbs(
+    V: NDArray[np.float64], W: NDArray[np.float64], T: NDArray[np.float64]
+) -> NDArray[np.float64]:
     """Reference LBS in numpy: blended matrices ``A_i = sum_j W_ij T_j``, then ``A_i [v_i; 1]``."""
     A = np.einsum("ij,jkl->ikl", W, T)
-    return np.einsum("ikl,il->ik", A[:, :, :3], V) + A[:, :, 3]
+    U: NDArray[np.float64] = np.einsum("ikl,il->ik", A[:, :, :3], V) + A[:, :, 3]
+    return U
 
 
-def numpy_einsum_lbs_packed(V, I, Wk, T):
+def numpy_einsum_lbs_packed(
+    V: NDArray[np.float64], I: NDArray[np.int64], Wk: NDArray[np.float64], T: NDArray[np.float64]
+) -> NDArray[np.float64]:
     A = np.einsum("ij,ijkl->ikl", Wk, T[I])
-    return np.einsum("ikl,il->ik", A[:, :, :3], V) + A[:, :, 3]
+    U: NDArray[np.float64] = np.einsum("ikl,il->ik", A[:, :, :3], V) + A[:, :, 3]
+    return U
 
 
-def numpy_matmul_lbs(V, W, T):
+def numpy_matmul_lbs(
+    V: NDArray[np.float64], W: NDArray[np.float64], T: NDArray[np.float64]
+) -> NDArray[np.float64]:
     A = (W @ T.reshape(T.shape[0], -1)).reshape(-1, 3, 4)
-    return np.einsum("ikl,il->ik", A[:, :, :3], V) + A[:, :, 3]
+    U: NDArray[np.float64] = np.einsum("ikl,il->ik", A[:, :, :3], V) + A[:, :, 3]
+    return U
 
 
-def main(argv=None) -> int:
+def _copy_bandwidth(copy_mb: int, r: int, bytes_dense: int) -> tuple[float, float, float, int, int]:
+    """Memory-copy bandwidth: numpy copy into a preallocated array; bytes = read + write.
+
+    Returns the bandwidth (bytes/s) of ``copy_mb`` MB on one thread and on ``threads`` threads,
+    that of a copy moving as many bytes as dense LBS (``same`` float64s), ``threads``, ``same``.
+    """
+    src = np.ones(copy_mb * (1 << 20) // 8)
+    dst = np.empty_like(src)
+    t_copy = _best(lambda: np.copyto(dst, src), r)
+    bw_copy = 2 * src.nbytes / t_copy
+    threads = max(1, min(2, os.cpu_count() or 1))
+    with ThreadPoolExecutor(threads) as ex:  # numpy releases the GIL while copying
+        parts = np.array_split(np.arange(len(src)), threads)
+        sl = [slice(p[0], p[-1] + 1) for p in parts]
+        t_copy2 = _best(lambda: list(ex.map(lambda q: np.copyto(dst[q], src[q]), sl)), r)
+    bw_copy2 = 2 * src.nbytes / t_copy2
+    same = bytes_dense // 2 // 8  # a copy moving as many bytes as dense LBS
+    t_same = _best(lambda: np.copyto(dst[:same], src[:same]), r)
+    bw_same = 2 * same * 8 / t_same
+    return bw_copy, bw_copy2, bw_same, threads, same
+
+
+def main(argv: list[str] | None = None) -> int:
     import skinrs
 
     ap = argparse.ArgumentParser(
@@ -91,25 +124,12 @@ def main(argv=None) -> int:
     bytes_dense = V.nbytes + W.nbytes + V.nbytes  # read V, W; write U
     bytes_packed = V.nbytes + I.nbytes + Wk.nbytes + V.nbytes
 
-    # Memory-copy bandwidth: numpy copy into a preallocated array; bytes = read + write.
-    src = np.ones(a.copy_mb * (1 << 20) // 8)
-    dst = np.empty_like(src)
-    t_copy = _best(lambda: np.copyto(dst, src), r)
-    bw_copy = 2 * src.nbytes / t_copy
-    threads = max(1, min(2, os.cpu_count() or 1))
-    with ThreadPoolExecutor(threads) as ex:  # numpy releases the GIL while copying
-        parts = np.array_split(np.arange(len(src)), threads)
-        sl = [slice(p[0], p[-1] + 1) for p in parts]
-        t_copy2 = _best(lambda: list(ex.map(lambda q: np.copyto(dst[q], src[q]), sl)), r)
-    bw_copy2 = 2 * src.nbytes / t_copy2
-    same = bytes_dense // 2 // 8  # a copy moving as many bytes as dense LBS
-    t_same = _best(lambda: np.copyto(dst[:same], src[:same]), r)
-    bw_same = 2 * same * 8 / t_same
-    src = dst = None  # free 1 GB before the skinning runs
+    # (the probe's 1 GB is freed before the skinning runs)
+    bw_copy, bw_copy2, bw_same, threads, same = _copy_bandwidth(a.copy_mb, r, bytes_dense)
 
-    rows = []
+    rows: list[tuple[str, float, float, float, float | None]] = []
 
-    def row(name, t, infl, nbytes, ref=None):
+    def row(name: str, t: float, infl: int, nbytes: int, ref: float | None = None) -> None:
         rows.append((name, t, n * infl / t, nbytes / t, (ref / t) if ref else None))
 
     # correctness guard, so a fast wrong kernel cannot look good here

@@ -12,11 +12,13 @@ import argparse
 import os
 import sys
 import time
+from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 
 
-def _best(fn, repeat):
-    times = []
+def _best(fn: Callable[[], object], repeat: int) -> float:
+    times: list[float] = []
     for _ in range(repeat):
         t = time.perf_counter()
         fn()
@@ -24,7 +26,7 @@ def _best(fn, repeat):
     return min(times)
 
 
-def main(argv=None) -> int:
+def main(argv: list[str] | None = None) -> int:
     import igl
     import scipy.sparse as sp
 
@@ -40,27 +42,27 @@ def main(argv=None) -> int:
     print(f"{args.mesh}: {V.shape[0]} vertices, {T.shape[0]} elements, best of {args.repeat}")
     kinds = {"voronoi": igl.MASSMATRIX_TYPE_VORONOI, "barycentric": igl.MASSMATRIX_TYPE_BARYCENTRIC}
 
-    def igl_B(kind):
+    def igl_B(kind: str) -> sp.csc_matrix:
         L = igl.cotmatrix(V, T)
         m = igl.massmatrix(V, T, kinds[kind]).diagonal()
         return (L.T @ sp.diags(1.0 / (m / m.max())) @ L).tocsc()
 
-    rows = [
+    rows: list[tuple[str, Callable[[], object], Callable[[], object]]] = [
         ("L cotan_laplacian", lambda: skinrs.cotan_laplacian(V, T), lambda: igl.cotmatrix(V, T))
     ]
-    for kind in kinds:
+    for kind, igl_kind in kinds.items():
         rows.append(
             (
                 f"M massmatrix {kind}",
-                lambda k=kind: skinrs.massmatrix(V, T, kind=k),
-                lambda k=kind: igl.massmatrix(V, T, kinds[k]),
+                partial(skinrs.massmatrix, V, T, kind=kind),
+                partial(igl.massmatrix, V, T, igl_kind),
             )
         )
         rows.append(
             (
                 f"B biharmonic {kind}",
-                lambda k=kind: skinrs.biharmonic_matrix(V, T, mass=k),
-                lambda k=kind: igl_B(k),
+                partial(skinrs.biharmonic_matrix, V, T, mass=kind),
+                partial(igl_B, kind),
             )
         )
     print(f"{'operator':<26}{'skinrs ms':>12}{'igl ms':>12}{'igl/skinrs':>12}")

@@ -25,30 +25,69 @@ import argparse
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, TypedDict
 
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
+from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import minimize
 
+if TYPE_CHECKING:
+    from typing_extensions import NotRequired
 
-def biharmonic_matrix(V, T):
+
+class PaperInfo(TypedDict):
+    """What :func:`paper_dual_lbfgs` reports besides the weights (its docstring says what)."""
+
+    iterations: int
+    nfev: int
+    time_factor: float
+    time_solve: float
+    energy: float
+    energy_raw: float
+    dual_objective: float
+    success: bool
+    message: str
+    tol: float
+    seed: int
+    reached: NotRequired[bool]
+    time_checks: NotRequired[float]
+
+
+class _Monitor(TypedDict):
+    checks: float
+    iterations: int
+    reached: bool
+    x: NDArray[np.float64] | None
+
+
+def biharmonic_matrix(V: ArrayLike, T: ArrayLike) -> sp.csc_matrix:
     """B = L^T M^{-1} L (libigl cotan L, Voronoi mass M / max(M)) as a scipy csc matrix."""
     import igl
 
-    V = np.ascontiguousarray(V, dtype=np.float64)
-    T = np.ascontiguousarray(T, dtype=np.int64)
-    L = igl.cotmatrix(V, T)
-    m = np.asarray(igl.massmatrix(V, T, igl.MASSMATRIX_TYPE_VORONOI).diagonal(), dtype=float)
+    Vc = np.ascontiguousarray(V, dtype=np.float64)
+    Tc = np.ascontiguousarray(T, dtype=np.int64)
+    L = igl.cotmatrix(Vc, Tc)
+    m = np.asarray(igl.massmatrix(Vc, Tc, igl.MASSMATRIX_TYPE_VORONOI).diagonal(), dtype=float)
     m = m / m.max()
     B = (L.T @ sp.diags(1.0 / m) @ L).tocsc()
     return ((B + B.T) * 0.5).tocsc()
 
 
 def paper_dual_lbfgs(
-    V, T, b, bc, tol=1e-6, seed=0, maxiter=100000, B=None,
-    target_energy=None, check_every=10, time_limit=None,
-):  # fmt: skip
+    V: NDArray[np.float64],
+    T: NDArray[np.int64],
+    b: ArrayLike,
+    bc: ArrayLike,
+    tol: float = 1e-6,
+    seed: int = 0,
+    maxiter: int = 100000,
+    B: sp.csc_matrix | None = None,
+    target_energy: float | None = None,
+    check_every: int = 10,
+    time_limit: float | None = None,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], PaperInfo]:
     """Solve PoU-BBW by the paper's dual (12) with L-BFGS on Y = U∘U.
 
     Inputs:
@@ -68,42 +107,47 @@ def paper_dual_lbfgs(
     Example:
       >>> W_raw, W, info = paper_dual_lbfgs(V, T, b, bc, tol=1e-6)   # doctest: +SKIP
     """
-    b = np.asarray(b, dtype=np.int64)
+    b_idx = np.asarray(b, dtype=np.int64)
     D = np.asarray(bc, dtype=np.float64)
     n = len(V)
     nb, m = D.shape
     t0 = time.perf_counter()
     if B is None:
         B = biharmonic_matrix(V, T)
-    C = sp.csc_matrix((np.ones(nb), (np.arange(nb), b)), shape=(nb, n))
+    C = sp.csc_matrix((np.ones(nb), (np.arange(nb), b_idx)), shape=(nb, n))
     K = sp.bmat([[B, C.T], [C, None]], format="csc")
     lu = spla.splu(K)
     time_factor = time.perf_counter() - t0
 
-    def apply_q11(Y):
-        return lu.solve(np.vstack([Y, np.zeros((nb, m))]))[:n]
+    def apply_q11(Y: NDArray[np.float64]) -> NDArray[np.float64]:
+        QY: NDArray[np.float64] = lu.solve(np.vstack([Y, np.zeros((nb, m))]))[:n]
+        return QY
 
-    def project(X):  # X P_m: subtract the row mean
-        return X - X.mean(axis=1, keepdims=True)
+    def project(X: NDArray[np.float64]) -> NDArray[np.float64]:  # X P_m: subtract the row mean
+        XP: NDArray[np.float64] = X - X.mean(axis=1, keepdims=True)
+        return XP
 
     t1 = time.perf_counter()
     Q12D = lu.solve(np.vstack([np.zeros((n, m)), D]))[:n]
     R = project(Q12D) + 1.0 / m
 
-    def fun(u):
+    def fun(u: NDArray[np.float64]) -> tuple[float, NDArray[np.float64]]:
         U = u.reshape(n, m)
         Y = U * U
         G = R + project(apply_q11(Y))  # eq. (16); 1/2 tr(P Y^T Q Y) = 1/2 <Y, Q Y P>
-        f = 0.5 * np.sum(Y * (G - R)) + np.sum(R * Y)
+        f = float(0.5 * np.sum(Y * (G - R)) + np.sum(R * Y))
         return f, (2.0 * U * G).ravel()
 
-    def post_process(W_raw):  # Sec. 8: clamp to [0, 1], renormalise rows
+    def post_process(W_raw: NDArray[np.float64]) -> NDArray[np.float64]:
+        # Sec. 8: clamp to [0, 1], renormalise rows
         W = np.clip(W_raw, 0.0, 1.0)
-        return W / W.sum(axis=1, keepdims=True)
+        W_rows: NDArray[np.float64] = W / W.sum(axis=1, keepdims=True)
+        return W_rows
 
-    monitor = {"checks": 0.0, "iterations": 0, "reached": False, "x": None}
+    monitor: _Monitor = {"checks": 0.0, "iterations": 0, "reached": False, "x": None}
 
-    def callback(intermediate_result):
+    def callback(intermediate_result: Any) -> None:  # a scipy.optimize.OptimizeResult
+        assert target_energy is not None  # (the callback is passed only with a target)
         monitor["iterations"] += 1
         if monitor["iterations"] % check_every:
             return
@@ -133,7 +177,7 @@ def paper_dual_lbfgs(
     time_solve = time.perf_counter() - t1 - monitor["checks"]
 
     W = post_process(W_raw)
-    info = {
+    info: PaperInfo = {
         "iterations": int(res.nit),
         "nfev": int(res.nfev),
         "time_factor": time_factor,
@@ -153,14 +197,14 @@ def paper_dual_lbfgs(
     return W_raw, W, info
 
 
-def _fixture(name):
+def _fixture(name: str) -> dict[str, NDArray[Any]]:
     root = Path(__file__).resolve().parents[3]
     path = root / "tests" / "reference" / f"{name}.npz"
     with np.load(path, allow_pickle=False) as z:
         return {k: z[k] for k in z.files}
 
 
-def main(argv=None) -> int:
+def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m skinrs.bench.paper_reference")
     ap.add_argument("cases", nargs="*", default=["knight"], help="fixture names in tests/reference")
     ap.add_argument("--tol", type=float, nargs="+", default=[1e-6])

@@ -27,13 +27,36 @@ from __future__ import annotations
 import argparse
 import os
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING, TypedDict, TypeVar
 
 import numpy as np
 import scipy.sparse as sp
+from numpy.typing import NDArray
 from scipy.sparse.csgraph import dijkstra
 
 import skinrs
+
+if TYPE_CHECKING:
+    from typing_extensions import Unpack
+
+    from skinrs import Info
+
+Out = TypeVar("Out")
+
+
+class _Solve(TypedDict, total=False):
+    """The solver options a run overrides (see :func:`skinrs.reduce_weights`)."""
+
+    tol: float
+    max_sweeps: int
+    relaxation: float
+    solver: str
+
+
+#: What :func:`skinrs.reduce_weights` returns with ``return_info=True``.
+Reduced = tuple[NDArray[np.int64], NDArray[np.float64], "Info"]
 
 # Table 1 rows: (model, verts, max weights, optimised, poses, kL, G, S, P, non-negative)
 TABLE1 = [
@@ -45,8 +68,9 @@ TABLE1 = [
 METHODS = ("k-largest", "geometric", "smooth", "poisson")
 
 
-def read_obj(path: Path):
-    V, F = [], []
+def read_obj(path: Path) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    V: list[list[float]] = []
+    F: list[list[int]] = []
     for line in path.read_text().splitlines():
         t = line.split()
         if not t:
@@ -58,7 +82,9 @@ def read_obj(path: Path):
     return np.array(V), np.array(F, dtype=np.int64)
 
 
-def upsample(V, F):
+def upsample(
+    V: NDArray[np.float64], F: NDArray[np.int64]
+) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
     """One step of midpoint (1-to-4) subdivision."""
     E = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
     uniq, inv = np.unique(E, axis=0, return_inverse=True)
@@ -72,7 +98,9 @@ def upsample(V, F):
     return V2, F2
 
 
-def synthetic_cage(V, F, m, poses, seed=0):
+def synthetic_cage(
+    V: NDArray[np.float64], F: NDArray[np.int64], m: int, poses: int, seed: int = 0
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """m control points at farthest-point samples, smooth PoU weights, smooth random poses."""
     rng = np.random.default_rng(seed)
     idx = [int(rng.integers(len(V)))]
@@ -97,7 +125,9 @@ def synthetic_cage(V, F, m, poses, seed=0):
     return W, C, P
 
 
-def decimated(V, F, n):
+def decimated(
+    V: NDArray[np.float64], F: NDArray[np.int64], n: int
+) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
     """libigl's edge-collapse decimation of a closed genus-0 mesh to ``n`` vertices."""
     import igl
 
@@ -106,7 +136,7 @@ def decimated(V, F, n):
     return np.ascontiguousarray(U), np.ascontiguousarray(G, dtype=np.int64)
 
 
-def timed(fn, repeat_below=0.5, repeats=3):
+def timed(fn: Callable[[], Out], repeat_below: float = 0.5, repeats: int = 3) -> tuple[float, Out]:
     """Seconds of ``fn()`` and its result: best of ``repeats`` for calls under ``repeat_below``
     seconds (a single cold call of a 30 ms method mostly measures page faults and thread
     wake-up), a single run otherwise."""
@@ -121,11 +151,21 @@ def timed(fn, repeat_below=0.5, repeats=3):
     return best, out
 
 
-def run_methods(V, F, W, P, k, nonneg, **kw):
-    times, infos = {}, {}
+def run_methods(
+    V: NDArray[np.float64],
+    F: NDArray[np.int64],
+    W: NDArray[np.float64],
+    P: NDArray[np.float64],
+    k: int,
+    nonneg: bool,
+    **kw: Unpack[_Solve],
+) -> tuple[dict[str, float], dict[str, Info]]:
+    times: dict[str, float] = {}
+    infos: dict[str, Info] = {}
     for method in METHODS:
-        t, out = timed(
-            lambda method=method: skinrs.reduce_weights(
+
+        def reduce(method: str = method) -> Reduced:
+            return skinrs.reduce_weights(
                 W,
                 k,
                 method=method,
@@ -136,12 +176,13 @@ def run_methods(V, F, W, P, k, nonneg, **kw):
                 return_info=True,
                 **kw,
             )
-        )
+
+        t, out = timed(reduce)
         times[method], infos[method] = t, out[2]
     return times, infos
 
 
-def main(argv=None) -> int:
+def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m skinrs.bench reduce")
     ap.add_argument("--data", default=os.environ.get("SKINRS_DATA", "../shared/data"))
     ap.add_argument("--quick", action="store_true", help="skip the scaling runs")
@@ -154,13 +195,20 @@ def main(argv=None) -> int:
         print(f"{name} rows: {len(Vm)} vertices, {len(Fm)} triangles")
     print()
 
-    t_np = None
-    rows = []
+    t_np: float | None = None
+    rows: list[
+        tuple[str, int, int, int, list[float], dict[str, float], dict[str, Info],
+              dict[str, float], dict[str, Info], int, bool]
+    ] = []  # fmt: skip
     for name, pn, pm, pk, pposes, *paper, nonneg in TABLE1:
         Vm, Fm = meshes[name.split()[0]]
         W, _, P = synthetic_cage(Vm, Fm, pm, pposes)
         if t_np is None:  # same-run reference: k-largest in numpy
-            t_np, _ = timed(lambda W=W, pk=pk: np.argpartition(-W, pk, axis=1)[:, :pk])
+
+            def k_largest(W: NDArray[np.float64] = W, pk: int = pk) -> NDArray[np.intp]:
+                return np.argpartition(-W, pk, axis=1)[:, :pk]
+
+            t_np, _ = timed(k_largest)
         times, infos = run_methods(Vm, Fm, W, P, pk, nonneg)
         budget = max(1, round(0.001 * len(Vm)))
         fixed, finfo = run_methods(
@@ -181,7 +229,7 @@ def main(argv=None) -> int:
     )
     print(hdr)
     print("-" * len(hdr))
-    worst = {}
+    worst: dict[str, float] = {}
     for name, n, pm, pposes, paper, times, infos, fixed, finfo, budget, nonneg in rows:
         for method, pt in zip(METHODS, paper):
             t, tf = times[method], fixed[method]
@@ -225,7 +273,15 @@ def main(argv=None) -> int:
             cols = []
             for nonneg in (False, True):
 
-                def run(nonneg=nonneg, W=W, P=P, Vs=Vs, Fs=Fs, k=k, **kw):
+                def run(
+                    nonneg: bool = nonneg,
+                    W: NDArray[np.float64] = W,
+                    P: NDArray[np.float64] = P,
+                    Vs: NDArray[np.float64] = Vs,
+                    Fs: NDArray[np.int64] = Fs,
+                    k: int = k,
+                    **kw: Unpack[_Solve],
+                ) -> tuple[float, Reduced]:
                     return timed(
                         lambda: skinrs.reduce_weights(
                             W,

@@ -26,8 +26,10 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any, cast
 
 import numpy as np
+from numpy.typing import NDArray
 
 # (name, fraction of the surface's faces removed by decimation, TetGen maximum tet volume)
 SIZES = [
@@ -40,7 +42,7 @@ SIZES = [
 HANDLES = 20
 
 
-def _data_dir(arg):
+def _data_dir(arg: str | None) -> Path:
     if arg:
         return Path(arg)
     root = os.environ.get(
@@ -49,14 +51,17 @@ def _data_dir(arg):
     return Path(root) / "armadillo"
 
 
-def _tet_mesh(surface_path, decimate, volume):
+def _tet_mesh(
+    surface_path: Path, decimate: float, volume: float | None
+) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
     """TetGen mesh (V, T) of the armadillo surface, decimated by ``decimate`` first."""
     import pyvista as pv
     import tetgen
     import trimesh
 
-    m = trimesh.load(surface_path, process=False)
-    V, F = np.asarray(m.vertices, float), np.asarray(m.faces, np.int64)
+    # an .obj surface loads as a Trimesh (load() is typed as returning its base class)
+    m = cast("trimesh.Trimesh", trimesh.load(surface_path, process=False))
+    V, F = np.asarray(m.vertices, np.float64), np.asarray(m.faces, np.int64)
     if decimate > 0:
         faces = np.hstack([np.full((len(F), 1), 3), F]).ravel()
         s = pv.PolyData(V, faces).decimate(decimate)
@@ -66,7 +71,7 @@ def _tet_mesh(surface_path, decimate, volume):
     return np.asarray(nodes, float), np.asarray(elems, np.int64)
 
 
-def _interior(V, T):
+def _interior(V: NDArray[np.float64], T: NDArray[np.int64]) -> NDArray[np.bool_]:
     """Mask of the vertices not on the boundary faces of the tet mesh."""
     faces = np.sort(
         np.vstack([T[:, [1, 2, 3]], T[:, [0, 2, 3]], T[:, [0, 1, 3]], T[:, [0, 1, 2]]]), 1
@@ -77,7 +82,9 @@ def _interior(V, T):
     return inside
 
 
-def _handle_points(V, T, k=HANDLES):
+def _handle_points(
+    V: NDArray[np.float64], T: NDArray[np.int64], k: int = HANDLES
+) -> NDArray[np.float64]:
     """``k`` points by farthest-point sampling over the interior vertices, from the centroid's."""
     P = V[_interior(V, T)]
     pick = [int(np.argmin(((P - P.mean(0)) ** 2).sum(1)))]
@@ -88,28 +95,31 @@ def _handle_points(V, T, k=HANDLES):
     return P[pick]
 
 
-def _snap(V, T, points):
+def _snap(
+    V: NDArray[np.float64], T: NDArray[np.int64], points: NDArray[np.float64]
+) -> NDArray[np.int64]:
     """The interior vertex nearest each point (distinct)."""
     from scipy.spatial import cKDTree
 
     idx = np.flatnonzero(_interior(V, T))
     _, near = cKDTree(V[idx]).query(points)
-    b = idx[near]
+    b: NDArray[np.int64] = idx[near]
     if len(set(b.tolist())) != len(b):
         raise RuntimeError("two handles snapped to one vertex")
     return b
 
 
-def build_series(data, cache, names):
+def build_series(data: Path, cache: Path, names: list[str]) -> dict[str, Path]:
     """Writes (once) and returns the paths of ``cache/armadillo-<name>.npz`` (V, T, b, bc)."""
     cache.mkdir(parents=True, exist_ok=True)
     surface = data / "armadillo.obj"
-    paths = {}
-    points = None
+    paths: dict[str, Path] = {}
+    points: NDArray[np.float64] | None = None
     for name, decimate, volume in SIZES:
         path = cache / f"armadillo-{name}.npz"
         if name not in names and not (points is None and name == SIZES[0][0]):
             continue
+        b: NDArray[np.int64] | None
         if path.exists():
             z = np.load(path)
             V, T, b = z["V"], z["T"], z["b"]
@@ -128,12 +138,13 @@ def build_series(data, cache, names):
     return {n: p for n, p in paths.items() if n in names}
 
 
-def _worker(method, tol, path):
+def _worker(method: str, tol: float, path: str) -> int:
     """Solves one case in this process and prints one JSON line."""
     z = np.load(path)
     V, T, b, bc = z["V"], z["T"], z["b"], z["bc"]
     cpu0 = time.process_time()
     t0 = time.perf_counter()
+    out: dict[str, object]
     if method == "skinrs":
         from .. import bbw_dual_constrained, biharmonic_energy, biharmonic_matrix
 
@@ -143,8 +154,12 @@ def _worker(method, tol, path):
         from .. import biharmonic_energy, biharmonic_matrix
         from . import paper_reference
 
-        _, W, info = paper_reference.paper_dual_lbfgs(V, T, b, bc, tol=tol)
-        out = {k: info[k] for k in ("iterations", "time_factor", "time_solve")}
+        _, W, paper_info = paper_reference.paper_dual_lbfgs(V, T, b, bc, tol=tol)
+        out = {
+            "iterations": paper_info["iterations"],
+            "time_factor": paper_info["time_factor"],
+            "time_solve": paper_info["time_solve"],
+        }
     out["wall"] = time.perf_counter() - t0
     out["cpu"] = time.process_time() - cpu0
     out["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
@@ -153,10 +168,10 @@ def _worker(method, tol, path):
     return 0
 
 
-def _run(method, tol, path, limit, mem_gb):
+def _run(method: str, tol: float, path: Path, limit: float, mem_gb: float) -> dict[str, Any]:
     cmd = [sys.executable, "-m", "skinrs.bench.scale", "--worker", method, repr(tol), str(path)]
 
-    def cap():
+    def cap() -> None:
         lim = int(mem_gb * 2**30)
         resource.setrlimit(resource.RLIMIT_AS, (lim, lim))
 
@@ -170,14 +185,15 @@ def _run(method, tol, path, limit, mem_gb):
         last = (r.stderr.strip().splitlines() or ["?"])[-1]
         oom = "MemoryError" in r.stderr or "memory allocation" in r.stderr
         return {"failed": f"out of memory (cap {mem_gb:g} GB)" if oom else last[:80]}
-    return json.loads(r.stdout.strip().splitlines()[-1])
+    result: dict[str, Any] = json.loads(r.stdout.strip().splitlines()[-1])
+    return result
 
 
-def _cell(r, key, spec):
+def _cell(r: dict[str, Any], key: str, spec: str) -> str:
     return format(r[key], spec) if key in r else "-"
 
 
-def main(argv=None) -> int:
+def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m skinrs.bench scale", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
     ap.add_argument("--worker", nargs=3, help=argparse.SUPPRESS)
