@@ -14,9 +14,6 @@ Examples
 from __future__ import annotations
 
 import argparse
-import csv
-import hashlib
-import html
 import json
 import os
 import sys
@@ -24,9 +21,23 @@ import tempfile
 import threading
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any, Literal, TypedDict
+from typing import TYPE_CHECKING, Any, Literal
 
-from ._cli_io import MESH_EXTS, UsageError, _ext
+from ._batch_assets import (
+    FORMATS,
+    OPTION_DEFAULTS,
+    TEST_HOOK_ENV,
+    TEST_HOOK_KEY,
+    AssetSpec,
+    Options,
+    Record,
+    _key,
+    _options,
+    _sha256,
+    find_assets,
+)
+from ._batch_report import Report, Summary, _write_json, summary_table, write_report
+from ._cli_io import UsageError
 
 if TYPE_CHECKING:
     from distributed import Future
@@ -35,164 +46,21 @@ if TYPE_CHECKING:
 
     from ._cli_commands import WeightsJob
 
-#: The options of ``skinrs weights`` by name, as the command line, a .csv or a .jsonl manifest
-#: give them (str, float, int or None).
-Options = dict[str, Any]
-#: A JSON object: an asset's record (``NAME.json``) or what a result depends on.
-Record = dict[str, Any]
-
-OPTION_DEFAULTS: Options = {
-    "method": "bbw",
-    "tol": None,
-    "steps": None,
-    "influences": None,
-    "reduce_method": "poisson",
-    "format": "glb",
-}
-FORMATS = ("glb", "gltf", "dmat", "npz", "csv")
-# Documented test hook: with SKINRS_BATCH_TEST_HOOKS=1 in a worker's environment, an asset whose
-# manifest row sets crash_worker_for_testing ends its worker process at once, as a segfaulting
-# mesher would (tests/test_batch.py). Without the variable the column is an error.
-TEST_HOOK_ENV = "SKINRS_BATCH_TEST_HOOKS"
-TEST_HOOK_KEY = "crash_worker_for_testing"
-
-
-class AssetSpec(TypedDict):
-    """One asset: its ``name`` (of its output files), ``mesh`` and ``skeleton`` paths and its
-    own ``options`` (a manifest row's overrides)."""
-
-    name: str
-    mesh: str
-    skeleton: str | None
-    options: Options
-
-
-class Summary(TypedDict):
-    """The counts of a batch run and its wall-clock ``seconds``."""
-
-    assets: int
-    done: int
-    failed: int
-    skipped: int
-    failed_total: int
-    seconds: float
-
-
-class Report(TypedDict):
-    """What :func:`run` returns (also ``report.json``): the ``summary`` and a record per asset."""
-
-    summary: Summary
-    records: list[Record]
-
-
-# --------------------------------------------------------------------------------------------
-# assets
-
-
-def find_assets(source: str | os.PathLike[str]) -> list[AssetSpec]:
-    """Asset specs ``dict(name, mesh, skeleton, options)`` from a directory or a manifest.
-
-    A directory is searched recursively: a mesh file with a skeleton of the same stem
-    (``STEM.tgf``, ``STEM_rig.txt`` or ``STEM.txt``) is one asset, and so is a ``.glb/.gltf``
-    without one (its skin gives the skeleton). A manifest is ``.csv`` (header row) or ``.jsonl``
-    with a ``mesh`` column, optional ``skeleton`` and ``name``, and per-asset overrides of the
-    options (``method``, ``tol``, ``steps``, ``influences``, ``reduce_method``, ``format``);
-    relative paths are relative to the manifest.
-    """
-    source = os.path.abspath(str(source))
-    rows: list[dict[str, Any]]
-    if os.path.isdir(source):
-        rows = _scan_directory(source)
-    elif _ext(source) == ".csv":
-        with open(source, newline="") as fh:
-            rows = [{k: v for k, v in r.items() if v not in ("", None)} for r in csv.DictReader(fh)]
-    elif _ext(source) in (".jsonl", ".json"):
-        with open(source) as fh:
-            rows = [json.loads(line) for line in fh if line.strip()]
-    else:
-        raise UsageError(f"{source}: not a directory, .csv or .jsonl manifest")
-    base = source if os.path.isdir(source) else os.path.dirname(source)
-    specs: list[AssetSpec] = []
-    seen: set[str] = set()
-    for i, row in enumerate(rows):
-        if "mesh" not in row:
-            raise UsageError(f"{source}: row {i + 1} has no 'mesh'")
-        row = dict(row)
-        mesh = os.path.join(base, row.pop("mesh"))
-        skel = row.pop("skeleton", None)
-        name = str(row.pop("name", None) or _default_name(base, mesh))
-        if not name or "/" in name or os.sep in name or name.startswith("."):
-            raise UsageError(f"{source}: row {i + 1}: {name!r} is not a file name")
-        if name in seen:
-            raise UsageError(f"{source}: two assets are named {name!r}; give a 'name' column")
-        seen.add(name)
-        unknown = set(row) - set(OPTION_DEFAULTS) - {TEST_HOOK_KEY}
-        if unknown:
-            raise UsageError(f"{source}: row {i + 1}: unknown column(s) {sorted(unknown)}")
-        specs.append({"name": name, "mesh": mesh, "skeleton": skel and os.path.join(base, skel),
-                      "options": row})  # fmt: skip
-    return specs
-
-
-def _scan_directory(root: str) -> list[dict[str, Any]]:
-    rows: list[dict[str, Any]] = []
-    for d, dirs, files in os.walk(root):
-        dirs.sort()
-        names = set(files)
-        for f in sorted(files):
-            stem, ext = os.path.splitext(f)
-            if ext.lower() not in MESH_EXTS:
-                continue
-            skel = next((s for s in (stem + ".tgf", stem + "_rig.txt", stem + ".txt")
-                         if s in names), None)  # fmt: skip
-            if skel is None and ext.lower() not in (".glb", ".gltf"):
-                continue
-            row = {"mesh": os.path.relpath(os.path.join(d, f), root)}
-            if skel is not None:
-                row["skeleton"] = os.path.relpath(os.path.join(d, skel), root)
-            rows.append(row)
-    return rows
-
-
-def _default_name(base: str, mesh: str) -> str:
-    rel = os.path.relpath(mesh, base)
-    stem = os.path.splitext(rel)[0] if not rel.startswith("..") else os.path.basename(mesh)
-    return stem.replace(os.sep, "--")
-
-
-def _options(spec: AssetSpec, common: Options) -> Options:
-    opts = dict(OPTION_DEFAULTS)
-    opts.update({k: v for k, v in common.items() if v is not None})
-    opts.update(spec["options"])
-    for key, cast in (("tol", float), ("steps", int), ("influences", int)):
-        if opts[key] is not None:
-            opts[key] = cast(opts[key])
-    opts.pop(TEST_HOOK_KEY, None)
-    if opts["format"] not in FORMATS:
-        raise UsageError(f"{spec['name']}: format {opts['format']!r} is not one of {FORMATS}")
-    return opts
-
-
-def _sha256(path: str | None) -> str | None:
-    if path is None or not os.path.isfile(path):
-        return None
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
-
-
-def _key(spec: AssetSpec, opts: Options) -> Record:
-    """What a result depends on: the inputs' contents, the options and skinrs' version."""
-    from . import __version__
-
-    return {
-        "inputs": {"mesh": _sha256(spec["mesh"]), "skeleton": _sha256(spec["skeleton"])},
-        "options": opts,
-        "skinrs_version": __version__,
-    }
-
+__all__ = [
+    "FORMATS",
+    "OPTION_DEFAULTS",
+    "TEST_HOOK_ENV",
+    "TEST_HOOK_KEY",
+    "AssetSpec",
+    "Report",
+    "Summary",
+    "estimate_peak_bytes",
+    "find_assets",
+    "run",
+    "run_asset",
+    "summary_table",
+    "write_report",
+]
 
 # --------------------------------------------------------------------------------------------
 # the per-asset job (runs on a Dask worker)
@@ -209,18 +77,6 @@ def estimate_peak_bytes(n_vertices: int, n_handles: int, tets: bool, method: str
     """
     n_volume = n_vertices if tets or method == "field" else 5 * n_vertices
     return int(400e6 + n_volume * (16 * 8 * max(n_handles, 1) + 3000))
-
-
-def _write_json(path: str, obj: object) -> None:
-    d = os.path.dirname(path)
-    fd, tmp = tempfile.mkstemp(prefix=".skinrs-", suffix=".json", dir=d)
-    try:
-        with os.fdopen(fd, "w") as fh:
-            json.dump(obj, fh, indent=1, default=float)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
 
 
 class _Watch:
@@ -503,58 +359,3 @@ class _bar:
         if self.tqdm is not None:
             self.tqdm.close()
             self.tqdm = None
-
-
-# --------------------------------------------------------------------------------------------
-# reports
-
-
-def write_report(outdir: str, records: list[Record], seconds: float) -> Report:
-    """``report.json`` and ``report.html`` in ``outdir``; returns the report."""
-    done = [r for r in records if r["status"] == "done" and not r.get("skipped")]
-    failed = [r for r in records if r["status"] == "failed" and not r.get("skipped")]
-    summary: Summary = {"assets": len(records), "done": len(done), "failed": len(failed),
-               "skipped": sum(bool(r.get("skipped")) for r in records),
-               "failed_total": sum(r["status"] == "failed" for r in records),
-               "seconds": seconds}  # fmt: skip
-    report: Report = {"summary": summary, "records": records}
-    _write_json(os.path.join(outdir, "report.json"), report)
-    fd, tmp = tempfile.mkstemp(prefix=".skinrs-", suffix=".html", dir=outdir)
-    with os.fdopen(fd, "w") as fh:
-        fh.write(_html(summary, records))
-    os.replace(tmp, os.path.join(outdir, "report.html"))
-    return report
-
-
-def _html(summary: Summary, records: list[Record]) -> str:
-    e = html.escape
-    rows = []
-    for r in records:
-        thumb = r.get("thumbnail")
-        img = f'<img src="{e(thumb)}" height="120">' if thumb else ""
-        gap = "" if r.get("gap") is None else f"{r['gap']:.1e}"
-        what = e(r.get("reason", "")) if r["status"] == "failed" else e(r.get("output", ""))
-        status = r["status"] + (" (earlier run)" if r.get("skipped") else "")
-        rows.append(f"<tr class={r['status']}><td>{e(r['name'])}</td><td>{status}</td>"
-                    f"<td>{r.get('seconds', 0):.1f}</td><td>{gap}</td>"
-                    f"<td>{r.get('peak_rss_mb', 0):.0f}</td><td>{what}</td><td>{img}</td></tr>")  # fmt: skip
-    seconds = round(summary["seconds"], 1)
-    head = ", ".join(f"{k} {v if k != 'seconds' else seconds}" for k, v in summary.items())
-    return ("<!doctype html><meta charset=utf-8><title>skinrs batch</title><style>"
-            "td{padding:2px 8px;vertical-align:middle}.failed{background:#fdd}</style>"
-            f"<h1>skinrs batch</h1><p>{e(head)}</p><table><tr><th>asset<th>status<th>s"
-            "<th>gap<th>peak MB<th>output / reason<th>weights</tr>"
-            + "\n".join(rows) + "</table>\n")  # fmt: skip
-
-
-def summary_table(report: Report) -> str:
-    """The report as a plain-text table (one line per asset, then the totals)."""
-    lines = [f"{'asset':<32} {'status':<8} {'s':>7}  output / reason"]
-    for r in report["records"]:
-        status = "skipped" if r.get("skipped") else r["status"]
-        what = r.get("reason") if r["status"] == "failed" else r.get("output")
-        lines.append(f"{r['name']:<32} {status:<8} {r.get('seconds', 0):7.1f}  {what}")
-    s = report["summary"]
-    lines.append(f"{s['done']} done, {s['failed']} failed, {s['skipped']} skipped "
-                 f"in {s['seconds']:.1f} s")  # fmt: skip
-    return "\n".join(lines)
