@@ -297,18 +297,7 @@ def _all_specs():
     return sorted(SPECS)
 
 
-# Open findings of the long run, kept in the example database: Triangle segfaults on an outline
-# with one vertex 4.7e16 away (a needle domain), and skin_weights on a domain scaled by 2e5 with
-# the skeleton left unscaled runs past the 30 s limit.
-OPEN = {"mesh_with_skeleton": "Triangle segfault on a needle outline (V entry -4.7e16)",
-        "skin_weights": "V scaled by 2e5 against an unscaled skeleton: > 30 s"}  # fmt: skip
-
-
-@pytest.mark.parametrize(
-    "name",
-    [pytest.param(n, marks=pytest.mark.xfail(reason=OPEN[n], strict=False)) if n in OPEN else n
-     for n in _all_specs()],
-)  # fmt: skip
+@pytest.mark.parametrize("name", _all_specs())
 def test_public_function(name, sandbox):
     spec = SPECS[name]
     base = spec.build()

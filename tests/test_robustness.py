@@ -137,6 +137,56 @@ def test_mesh_with_tiny_coordinates(sandbox):
     raises_naming(out, "V row 1")
 
 
+def test_needle_outline(sandbox):
+    # once a nondeterministic segfault in Triangle: normalised, rows 0 and 3 became one vertex
+    V = np.array([[0.0, 0], [4, -4.7e16], [4, 1], [0, 1]])
+    C = np.array([[0.5, 0.5], [2, 0.5], [3.5, 0.5]])
+    for f in ("mesh_with_skeleton", "skin_weights"):
+        out = sandbox.call(f"skinrs:{f}", V, None, C, [[0, 1], [1, 2]])
+        assert "same units" in raises_naming(out, "C")
+        # a skeleton along the needle: the outline's end is below double precision
+        for _ in range(3):
+            out = sandbox.call(f"skinrs:{f}", V, None, [[2, 0.5], [3.7, -4e16]], [[0, 1]])
+            assert "lie 1 apart" in raises_naming(out, "V rows 0 and 3")
+
+
+def test_triangle_refinement_that_never_ends(sandbox):
+    # a self-crossing outline on which Triangle's quality refinement loops, filling the memory
+    # (17 GB in 2 minutes): it runs in a child process with a memory bound
+    V = np.array(
+        [[-4.0274381813233449, 2.8656206815747471], [-2.4834839993864797e-3, -4.0672663772630688e-3],
+         [19.573146182101720, 5.8279162798843140], [-750.75201540134583, 347.29182527219450],
+         [-7.5294784516984443e-3, 5.4783709894190456e-3], [-3.1713384495036585e-4, 8.7272363983125466e-4],
+         [1.4283578719939157e-4, -2.2433194096868051e-5], [-1.6177871489921735e-2, -3.0183744660197136e-3]]
+    )  # fmt: skip
+    C = np.array([[0.21673101079154974, -0.01329912766410345], [0.4353071030618173, 0.44207591857555717],
+                  [0.22413942026274367, 0.8981862358742393]])  # fmt: skip
+    out = sandbox.call("skinrs:mesh_with_skeleton", V, None, C, [[0, 1], [1, 2]])
+    assert "crossing" in raises_naming(out, "V, F")
+
+
+def test_triangle_area_switch_in_input_units():
+    # the area bound reaches Triangle in unit-box units without an exponent ("6.25e-05" was
+    # read as the switches e, 0, 5 and the bound dropped)
+    V = np.array([[0.0, 0], [4, 0], [4, 1], [0, 1]]) * 100
+    C = np.array([[50.0, 50], [350, 50]])
+    Vv, T, _, _ = skinrs.mesh_with_skeleton(V, None, C, [[0, 1]], flags="pq30a10")
+    e1, e2 = Vv[T[:, 1]] - Vv[T[:, 0]], Vv[T[:, 2]] - Vv[T[:, 0]]
+    area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+    assert area.max() <= 10 * (1 + 1e-9) and area.sum() == pytest.approx(40_000)
+    with pytest.raises(ValueError, match="flags 'pa0.00000001': .*memory"):
+        skinrs.mesh_with_skeleton(V, None, C, [[0, 1]], flags="pa0.00000001")
+
+
+@pytest.mark.parametrize("scale_V, scale_C", [(2e5, 1.0), (1.0, 1e-5)])
+def test_skeleton_in_other_units_than_the_shape(sandbox, scale_V, scale_C):
+    # V scaled by 2e5 against an unscaled skeleton: a mesh of needles, and a solve of minutes
+    V = np.array([[0.0, 0], [4, 0], [4, 1], [0, 1]]) * scale_V
+    C = np.array([[0.5, 0.5], [2, 0.5], [3.5, 0.5]]) * scale_C
+    out = sandbox.call("skinrs:skin_weights", V, None, C, [[0, 1], [1, 2]])
+    assert "same units" in raises_naming(out, "C")
+
+
 @pytest.mark.parametrize("spe, what", [(0, "samples_per_edge"), (1e9, "samples_per_edge")])
 def test_samples_per_edge(spe, what):
     V = np.array([[0.0, 0], [4, 0], [4, 1], [0, 1]])

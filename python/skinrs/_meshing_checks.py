@@ -111,4 +111,26 @@ def _checked_domain(
         raise ValueError("no handles: give bones BE and/or point handles P")
     if BE is not None and np.any(BE[:, 0] == BE[:, 1]):
         raise ValueError(f"bone {int(np.flatnonzero(BE[:, 0] == BE[:, 1])[0])} has zero length")
+    _check_skeleton_span(V, C, BE, P)
     return V, F, C, BE, P, planar
+
+
+# A skeleton spanning less than this fraction of the shape is a unit mistake (V in mm, C in m):
+# the mesh around it is all needles, and the solve on it crawls (minutes at 1e-5) or is wrong.
+_SKELETON_SPAN_MIN = 1e-4
+
+
+def _check_skeleton_span(V: Arr, C: Arr, BE: Arr | None, P: Arr | None) -> None:
+    """ValueError when the joints in use span less than ``_SKELETON_SPAN_MIN`` of ``V``."""
+    used = np.unique(np.concatenate([np.ravel([] if X is None else X) for X in (BE, P)]))
+    J = C[used.astype(np.int64)]
+    if len(np.unique(J, axis=0)) < 2:  # a single point handle
+        return
+    span = float(np.linalg.norm(J.max(0) - J.min(0)))
+    shape = float(np.linalg.norm(V.max(0) - V.min(0)))
+    if span < _SKELETON_SPAN_MIN * shape:
+        raise ValueError(
+            f"C: the handles span {span:.3g} (bounding-box diagonal), only {span / shape:.2g} of "
+            f"the shape V ({shape:.3g}); are C and V in the same units? (the skeleton must "
+            f"span at least {_SKELETON_SPAN_MIN:g} of the shape)"
+        )

@@ -156,7 +156,10 @@ def mesh_with_skeleton(
     Raises
     ------
     ValueError
-        A bone or point handle wholly outside the surface, bad shapes or indices.
+        A bone or point handle wholly outside the surface; handles spanning less than 1e-4 of
+        the shape (C and V in different units); two points closer than 1e-12 of the extent
+        (double precision cannot keep them apart); a 2D domain Triangle fails on (it runs in a
+        child process); bad shapes or indices.
     ImportError
         The meshing package is missing (``pip install skinrs[mesh]``), or TetGen failed and
         ``pytetwild`` is not installed.
@@ -164,7 +167,9 @@ def mesh_with_skeleton(
     Warns
     -----
     MeshingWarning
-        A bone partly outside (its outside samples are dropped), or snapped samples.
+        A bone partly outside (its outside samples are dropped), snapped samples, or Triangle
+        stopped refining at its bound on added vertices (switch ``S``; by default 200 per input
+        point, at least 50,000).
 
     Examples
     --------
@@ -239,7 +244,14 @@ def _mesh_planar(
     # An outline is refined to quality triangles; a given triangle mesh keeps its resolution
     # (refining around its interior vertices next to bone segments cascades to slivers).
     default = "pq30Y" if F is None or F.shape[1] == 2 else "pY"
-    Vv, T = _triangle(Vd, E, Si, seg, flags or default, verbose)
+    Vv, T, budget = _triangle(Vd, E, Si, seg, flags or default, verbose)
+    if budget is not None:
+        warnings.warn(
+            f"Triangle stopped refining after adding {budget:,} vertices: the quality switch "
+            "is not met everywhere (crossing edges or features far below the extent of V?)",
+            MeshingWarning,
+            stacklevel=3,
+        )
     if not _rows_match(Vv, Vd, Si):
         raise RuntimeError("Triangle did not keep the input vertices and samples in order")
     # Triangle keeps triangles inside the outer segments only: drop those in holes
