@@ -3,6 +3,10 @@ result. Calls that once crashed the process run in a ``_sandbox`` worker."""
 
 from __future__ import annotations
 
+import threading
+from concurrent.futures import ThreadPoolExecutor
+
+import _fuzz_cases
 import numpy as np
 import pytest
 import skinrs
@@ -332,6 +336,49 @@ def test_callback_errors_pass_through():
         skinrs.bbw_dual_constrained(V, T, b, bc, callback=mine)
     with pytest.raises(ValueError, match="callback must be callable"):
         skinrs.bbw_dual_constrained(V, T, b, bc, callback=5)
+
+
+def _callback_calls():
+    """A call of each binding that reports progress to a callback."""
+    V, T = grid_2d(12)
+    return {
+        "bbw": lambda cb: skinrs.bbw_dual_constrained(V, T, [0, 143], np.eye(2), callback=cb),
+        "reduce": lambda cb: skinrs.reduce_weights(**_fuzz_cases._poisson_kw(), callback=cb),
+        "field": lambda cb: skinrs.bbw_field(**_fuzz_cases._field_kw(), callback=cb),
+    }
+
+
+@pytest.mark.parametrize("name", ["bbw", "reduce", "field"])
+def test_callbacks_run_on_the_calling_thread(name):
+    # the callback's exception is kept per thread until the computation (which may run its
+    # loops on rayon's threads) has stopped; it must reach the caller in every thread
+    call = _callback_calls()[name]
+    seen: list[int] = []
+    call(lambda *a: seen.append(threading.get_ident()))
+    assert seen and set(seen) == {threading.get_ident()}
+
+    class Mine(Exception):
+        pass
+
+    def run(i):
+        def cb(*a):
+            seen.append(threading.get_ident())
+            if i == 2:
+                raise KeyboardInterrupt
+            raise Mine(f"from thread {i}")
+
+        try:
+            call(cb)
+        except (Mine, KeyboardInterrupt) as e:
+            return type(e).__name__, str(e), threading.get_ident()
+        return None
+
+    seen.clear()
+    with ThreadPoolExecutor(3) as pool:
+        out = list(pool.map(run, range(3)))
+    assert [o[:2] for o in out] == [("Mine", "from thread 0"), ("Mine", "from thread 1"),
+                                    ("KeyboardInterrupt", "")]  # fmt: skip
+    assert set(seen) == {o[2] for o in out}
 
 
 def test_overflowing_coordinates_say_overflow():

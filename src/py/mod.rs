@@ -33,6 +33,9 @@ create_exception!(
 thread_local! {
     /// The exception a progress callback raised, re-raised unchanged once the computation has
     /// stopped (so a `KeyboardInterrupt` or the user's own exception type reaches the caller).
+    /// Thread-local is right because `report` runs on the thread that called the binding: the
+    /// numerics get `&mut dyn Progress`, which is not `Send`, so no rayon task can capture it
+    /// (tests/test_robustness.py checks the thread, also for calls from Python threads).
     static CALLBACK_ERROR: RefCell<Option<PyErr>> = const { RefCell::new(None) };
 }
 
