@@ -255,9 +255,60 @@ def test_bad_files_and_arguments(arm, tmp_path):
         assert_one_line_error(skinrs_cli(*args), words)
     assert not list(tmp_path.glob("o.*")) and not list(tmp_path.glob(".skinrs-*"))
     run = skinrs_cli("weights", arm / "arm.obj", "--method", "nope", "-o", tmp_path / "o.glb")
-    assert run.returncode == 2 and "invalid choice" in run.stderr
+    assert_one_line_error(run, "invalid choice")
     run = skinrs_cli("--debug", "info", tmp_path / "bad.glb")
     assert run.returncode != 0 and "Traceback" in run.stderr
+
+
+def test_bad_input_gives_one_line_and_exit_2(arm, tmp_path):
+    # a small fuzz of the command line: bad files, formats, -k and options (run in parallel)
+    d = tmp_path
+    (d / "junk.obj").write_bytes(b"garbage\x00\x01")
+    (d / "nan.obj").write_text("v nan 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    (d / "cut.obj").write_text((arm / "arm.obj").read_text()[:200])
+    (d / "bad.tgf").write_text("0 0 0\n")
+    (d / "w.csv").write_text("0.5 0.5\n")
+    (d / "w.dmat").write_text("3 2\n0.5 0.5\n0.5 0.5\n0.5 0.5\n")
+    np.savez(d / "w.npz", X=np.ones((2, 2)))
+    mesh, tgf, out = arm / "arm.obj", arm / "arm.tgf", d / "o.glb"
+    cases = [
+        (("weights", d / "junk.obj", tgf, "-o", out), "junk.obj: line 1"),
+        (("weights", d / "nan.obj", tgf, "-o", out), "non-finite"),
+        (("weights", d / "cut.obj", tgf, "-o", out), "cut.obj: line"),
+        (("weights", mesh, d / "bad.tgf", "-o", out), "bad.tgf: line 1"),
+        (("weights", mesh, tgf, "-o", d / "nodir" / "o.glb"), "does not exist"),
+        (("weights", mesh, tgf, "-k", "0", "-o", out), "--influences"),
+        (("weights", mesh, tgf, "-k", "x", "-o", out), "--influences"),
+        (("weights", mesh, tgf, "--tol", "-1", "-o", out), "--tol"),
+        (("weights", mesh, tgf, "--tol", "nan", "-o", out), "--tol"),
+        (("weights", mesh, tgf, "--steps", "0", "--method", "field", "-o", out), "--steps"),
+        (("weights", mesh, tgf, "--frobnicate", "-o", out), "--frobnicate"),
+        (("weights", mesh, tgf), "-o"),
+        (("reduce", d / "w.csv", "-k", "1", "--method", "k-largest", "-o", d / "o.csv"), "w.csv"),
+        (("reduce", d / "w.npz", "-k", "1", "--method", "k-largest", "-o", d / "o.csv"), "'W'"),
+        (("reduce", d / "w.dmat", "-k", "0", "-o", d / "o.csv"), "-k"),
+        (("reduce", d / "w.dmat", "-k", "9", "--method", "k-largest", "-o", d / "o.csv"), "only 3 handles"),
+        (("reduce", d / "missing.dmat", "-k", "1", "-o", d / "o.csv"), "no such file"),
+        (("pose", d / "missing.glb", "-o", d / "p.png"), "no such file"),
+        (("pose", mesh, "-o", d / "p.png"), "not a skinned glTF"),
+        (("info", d / "junk.obj"), "junk.obj: line 1"),
+        (("info", mesh, d / "bad.tgf"), "bad.tgf"),
+        (("batch", d / "missing", "-o", d / "b"), "manifest"),
+        (("batch", d, "-o", d / "b", "--workers", "0"), "--workers"),
+        (("batch", d, "-o", d / "b", "--retries", "-1"), "--retries"),
+        (("nope",), "invalid choice"),
+        ((), "COMMAND"),
+    ]  # fmt: skip
+    procs = [
+        subprocess.Popen([sys.executable, "-m", "skinrs", *map(str, args)], text=True,
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        for args, _ in cases
+    ]  # fmt: skip
+    for (args, words), proc in zip(cases, procs, strict=True):
+        out, err = proc.communicate(timeout=300)
+        run = subprocess.CompletedProcess(proc.args, proc.returncode, out, err)
+        assert_one_line_error(run, words)
+    assert not list(d.glob("o.*")) and not list(d.glob("p.*")) and not (d / "b").exists()
 
 
 def test_ctrl_c_exits_130_and_writes_nothing(arm, tmp_path):

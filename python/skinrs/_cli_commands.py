@@ -231,6 +231,8 @@ def cmd_reduce(args: argparse.Namespace) -> None:
     from .reduce import reduce_weights
 
     W = read_weights(args.weights)
+    if W.ndim == 2 and args.k > W.shape[1]:
+        raise UsageError(f"-k {args.k}: {args.weights} has only {W.shape[1]} handles (columns)")
     V: Floats | None = None
     F: Ints | None = None
     skeleton: Skeleton | None = None

@@ -113,7 +113,10 @@ def read_weights(path: str) -> NDArray[np.float64]:
     if ext == ".dmat":
         return io.read_dmat(path)
     if ext == ".csv":
-        return np.loadtxt(path, delimiter=",", ndmin=2)
+        try:
+            return np.loadtxt(path, delimiter=",", ndmin=2)
+        except ValueError as e:  # numpy's message names neither the file nor the format
+            raise UsageError(f"{path}: not comma-separated numbers ({e})") from None
     if ext == ".npz":
         with np.load(path) as z:
             if "W" not in z:
@@ -123,12 +126,19 @@ def read_weights(path: str) -> NDArray[np.float64]:
     raise UsageError(f"{path}: unknown weights format {ext!r}; expected {', '.join(WEIGHT_EXTS)}")
 
 
-@contextlib.contextmanager
-def atomic_output(path: str) -> Iterator[str]:
-    """A temporary path next to ``path`` (same extension) that replaces it on success."""
+def output_directory(path: str) -> str:
+    """The directory ``path`` would be written to; UsageError when it does not exist (checked
+    before a command starts its work, and again when it writes)."""
     d = os.path.dirname(os.path.abspath(path)) or "."
     if not os.path.isdir(d):
         raise UsageError(f"{path}: directory {d} does not exist")
+    return d
+
+
+@contextlib.contextmanager
+def atomic_output(path: str) -> Iterator[str]:
+    """A temporary path next to ``path`` (same extension) that replaces it on success."""
+    d = output_directory(path)
     fd, tmp = tempfile.mkstemp(prefix=".skinrs-", suffix=_ext(path), dir=d)
     os.close(fd)
     try:

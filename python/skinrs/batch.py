@@ -261,8 +261,8 @@ def run(
         raise ImportError("skinrs batch needs Dask: pip install 'skinrs[batch]'") from e
     t0 = time.time()
     outdir = os.path.abspath(str(outdir))
+    specs = find_assets(source)  # first: a bad source leaves no empty outdir behind
     os.makedirs(outdir, exist_ok=True)
-    specs = find_assets(source)
     records: dict[str, Record] = {}
     todo: list[tuple[AssetSpec, Options, Record]] = []
     for spec in specs:

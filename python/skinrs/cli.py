@@ -9,8 +9,10 @@ never leaves a partial file.
 from __future__ import annotations
 
 import argparse
+import math
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from typing import NoReturn
 
 from ._cli_commands import (  # noqa: F401 - re-exported
     WEIGHT_EXTS,
@@ -37,10 +39,39 @@ from ._cli_commands import (  # noqa: F401 - re-exported
     weights_job,
     write_weights,
 )
-from ._cli_io import MESH_EXTS
+from ._cli_io import MESH_EXTS, output_directory
 
 # --------------------------------------------------------------------------------------------
 # parser
+
+
+class _Parser(argparse.ArgumentParser):
+    """Usage errors in one line like every other error (the usage itself is in ``--help``)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def _count(zero: bool = False) -> Callable[[str], int]:
+    """An argparse type: a positive integer (or non-negative, with ``zero``)."""
+    return lambda s: int(
+        _number(s, int, zero, "non-negative integer" if zero else "positive integer")
+    )
+
+
+def _positive(s: str) -> float:
+    """An argparse type: a positive finite number."""
+    return _number(s, float, False, "positive finite number")
+
+
+def _number(s: str, cast: Callable[[str], float], zero: bool, what: str) -> float:
+    try:
+        x = cast(s)
+    except ValueError:
+        x = math.nan
+    if not (math.isfinite(x) and (x > 0 or (zero and x == 0))):
+        raise argparse.ArgumentTypeError(f"must be a {what}, got {s!r}")
+    return x
 
 
 def _add_weight_options(p: argparse.ArgumentParser) -> None:
@@ -48,8 +79,8 @@ def _add_weight_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--method", choices=("bbw", "field"), default="bbw",
                    help="bbw: tet-meshed BBW (default); field: mesh-free geometric field "
                    "(soups, open meshes, point clouds)")  # fmt: skip
-    p.add_argument("--tol", type=float, default=None, help="relative duality gap (bbw, 1e-6)")
-    p.add_argument("--steps", type=int, help="optimisation steps (field, default 6000)")
+    p.add_argument("--tol", type=_positive, default=None, help="relative duality gap (bbw, 1e-6)")
+    p.add_argument("--steps", type=_count(), help="optimisation steps (field, default 6000)")
     p.add_argument("-k", "--influences", type=int, choices=(1, 2, 3, 4, 5, 6, 7, 8),
                    help="influences per vertex (glTF: 4 by default, or 8)")  # fmt: skip
     p.add_argument("--reduce-method", default="poisson",
@@ -58,7 +89,7 @@ def _add_weight_options(p: argparse.ArgumentParser) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="skinrs", description=__doc__.split("\n")[0])
+    p = _Parser(prog="skinrs", description=__doc__.split("\n")[0])
     p.add_argument("--debug", action="store_true", help="show tracebacks of errors")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars or messages")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -86,12 +117,12 @@ def build_parser() -> argparse.ArgumentParser:
     _add_weight_options(b)
     b.add_argument("--scheduler", help="tcp://host:port of a Dask scheduler (default: a "
                    "LocalCluster, one single-threaded worker process per core)")  # fmt: skip
-    b.add_argument("--workers", type=int, help="LocalCluster workers (default: cores)")
+    b.add_argument("--workers", type=_count(), help="LocalCluster workers (default: cores)")
     b.add_argument("--memory-limit", default="auto",
                    help="LocalCluster memory per worker, e.g. 4GB (default: RAM / workers)")  # fmt: skip
-    b.add_argument("--retries", type=int, default=1,
+    b.add_argument("--retries", type=_count(zero=True), default=1,
                    help="retries of an asset after an error or a dead worker (default 1)")  # fmt: skip
-    b.add_argument("--timeout", type=float, help="seconds per asset (default: none)")
+    b.add_argument("--timeout", type=_positive, help="seconds per asset (default: none)")
     b.add_argument("--retry-failed", action="store_true",
                    help="redo assets that failed in an earlier run (default: skip them)")  # fmt: skip
     b.set_defaults(run=cmd_batch)
@@ -99,7 +130,7 @@ def build_parser() -> argparse.ArgumentParser:
     r = sub.add_parser("reduce", help="cut weights to k influences per vertex",
                        description="Poisson-based weight reduction (Landreneau & Schaefer 2010).")  # fmt: skip
     r.add_argument("weights", metavar="WEIGHTS", help="weights: .dmat, .npz (array W) or .csv")
-    r.add_argument("-k", type=int, required=True, help="influences per vertex")
+    r.add_argument("-k", type=_count(), required=True, help="influences per vertex")
     r.add_argument("--method", default="poisson",
                    choices=("k-largest", "smooth", "geometric", "poisson"),
                    help="default poisson (needs --mesh and --skeleton)")  # fmt: skip
@@ -131,6 +162,8 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
+        if getattr(args, "output", None) is not None:  # before the work, not after it
+            output_directory(args.output)
         rc: int | None = args.run(args)
     except KeyboardInterrupt:
         print("skinrs: interrupted", file=sys.stderr)
