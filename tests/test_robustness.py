@@ -169,6 +169,24 @@ def test_triangle_refinement_that_never_ends(sandbox):
     assert "crossing" in raises_naming(out, "V, F")
 
 
+def test_tetgen_heap_corruption_is_an_error(sandbox):
+    # a cube with one corner pushed just through the opposite face: TetGen's self-intersection
+    # check passes, then it corrupts its heap ("corrupted double-linked list", abort); it runs
+    # in a child process, and the fTetWild fallback meshes the surface instead
+    V, F = cube_surface()
+    V = V.astype(float)
+    V[4, 0] = 1 - 1.0000162464402906
+    C = np.array([[0.3, 0.5, 0.5], [0.7, 0.5, 0.5]])
+    out = sandbox.call("skinrs._external_meshers:_tetgen", V, F, C, "pq2Y", False, check=True)
+    assert out.raised("RuntimeError") and "TetGen failed" in out.message, out.message
+    out = sandbox.call("skinrs:mesh_with_skeleton", V, F, C, [[0, 1]])
+    assert out.error is None, out.message
+    Vv, T, b, bc = out.value
+    S = Vv[b]  # the bone samples: on the bone
+    assert T.shape[1] == 4 and T.max() < len(Vv) and np.allclose(bc.sum(1), 1)
+    assert np.allclose(S[:, 1:], 0.5) and np.all((S[:, 0] > 0.3 - 1e-9) & (S[:, 0] < 0.7 + 1e-9))
+
+
 def test_triangle_area_switch_in_input_units():
     # the area bound reaches Triangle in unit-box units without an exponent ("6.25e-05" was
     # read as the switches e, 0, 5 and the bound dropped)

@@ -1,12 +1,13 @@
 """Calls into the optional meshers: TetGen (3D), Triangle (2D) and fTetWild (3D fallback).
 
 They are reached through the Python packages ``tetgen``, ``triangle`` and ``pytetwild``
-(``pip install skinrs[mesh]``), never linked into skinrs's compiled core.
+(``pip install skinrs[mesh]``), never linked into skinrs's compiled core, and run in a child
+process: each of them crashes or loops on some inputs, which then is an exception here (and
+Ctrl-C stops the child). Their scratch files land in the child's temporary directory.
 """
 
 from __future__ import annotations
 
-import contextlib
 import importlib.util
 import json
 import os
@@ -14,7 +15,6 @@ import re
 import subprocess
 import sys
 import tempfile
-from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
@@ -24,44 +24,6 @@ from . import _checks
 from ._tet_edit import _tet_volumes
 
 _INSTALL = "install the optional meshing packages with `pip install skinrs[mesh]`"
-
-
-@contextlib.contextmanager
-def _quiet_fd1(quiet: bool) -> Iterator[None]:
-    """Silences C-level prints to stdout (the tetgen wrapper prints even with "Q")."""
-    if not quiet:
-        yield
-        return
-    sys.stdout.flush()
-    try:
-        saved = os.dup(1)
-    except OSError:  # no real stdout
-        yield
-        return
-    try:
-        with open(os.devnull, "w") as null:
-            os.dup2(null.fileno(), 1)
-            yield
-    finally:
-        os.dup2(saved, 1)
-        os.close(saved)
-
-
-# Files TetGen (on a self-intersecting surface) and fTetWild write into the working directory.
-_LITTER = ("tetgen-tmpfile_skipped.face", "tetgen-tmpfile_skipped.node", "__tracked_surface.stl")
-
-
-@contextlib.contextmanager
-def _no_litter() -> Iterator[None]:
-    """Removes the scratch files the meshers leave in the working directory (only those the
-    call created: a file of that name that was there before is left alone)."""
-    before = {f for f in _LITTER if os.path.exists(f)}
-    try:
-        yield
-    finally:
-        for f in set(_LITTER) - before:
-            with contextlib.suppress(OSError):
-                os.remove(f)
 
 
 # Unit-box coordinates below this (but not 0) are refused: the fourth-degree incircle test of
@@ -167,37 +129,57 @@ def _import_tetgen() -> Any:
 
 
 def _tetgen(
-    V: NDArray[Any], F: NDArray[Any], S: NDArray[Any], flags: str, verbose: bool
+    V: NDArray[Any],
+    F: NDArray[Any],
+    S: NDArray[Any],
+    flags: str,
+    verbose: bool,
+    check: bool = False,
 ) -> tuple[NDArray[Any], NDArray[Any]]:
-    tetgen = _import_tetgen()
+    """TetGen's ``(V_vol, T)`` for the surface ``(V, F)`` with the points ``S`` inserted, run in
+    a child process. RuntimeError when TetGen fails (its message), crashes (it corrupts its heap
+    on some slightly bent planar faces), or, with ``check``, when the surface intersects itself
+    (checked first: TetGen given such a surface *and* points to insert can abort)."""
     if not verbose and "Q" not in flags:
         flags += "Q"
+    out = _tetgen_child(V, F, S, flags, verbose, check, check_only=False)
+    if "self_intersects" in out:
+        raise RuntimeError("the input surface has self-intersections")
+    return out["vertices"].astype(np.float64), out["elements"].astype(np.int64)
+
+
+def _self_intersects(V: NDArray[Any], F: NDArray[Any]) -> bool:
+    """Whether TetGen finds intersecting faces in the surface alone (switch ``d``)."""
+    out = _tetgen_child(V, F, np.zeros((0, np.shape(V)[1])), "", False, True, check_only=True)
+    return bool(out["self_intersects"])
+
+
+def _tetgen_child(
+    V: NDArray[Any],
+    F: NDArray[Any],
+    S: NDArray[Any],
+    flags: str,
+    verbose: bool,
+    check: bool,
+    check_only: bool,
+) -> dict[str, NDArray[Any]]:
+    _import_tetgen()
     pts = np.vstack([V, S])
     _to_unit_box(pts, len(V))  # refuses coordinates whose products underflow
     # TetGen gets the input units: its tolerances are relative, and unit-box input changed its
     # results on self-intersecting surfaces (an abort instead of an error)
-    with _quiet_fd1(not verbose), _no_litter():
-        tg = tetgen.TetGen(pts, F.astype(np.int32))
-        VV, TT = tg.tetrahedralize(switches=flags)[:2]
-    # copies: the arrays may view memory owned by `tg`, freed when it goes away
-    return np.array(VV, dtype=np.float64, copy=True), np.array(TT, dtype=np.int64, copy=True)
-
-
-def _self_intersects(V: NDArray[Any], F: NDArray[Any]) -> bool:
-    """Whether TetGen finds intersecting faces in the surface alone (switch ``d``).
-
-    Checked before the real TetGen run because TetGen, given a self-intersecting surface *and*
-    extra points to insert, can corrupt its heap and abort the whole Python process (seen with
-    two overlapping tubes) instead of raising; on the bare surface the check raises cleanly."""
-    tetgen = _import_tetgen()
-
-    _to_unit_box(np.asarray(V, float), len(V))
-    with _quiet_fd1(True), _no_litter():
-        try:
-            tetgen.TetGen(V, F.astype(np.int32)).tetrahedralize(switches="dQ")
-        except RuntimeError as e:  # "The input surface mesh contain self-intersections."
-            return "self-intersect" in str(e)
-    return False
+    inputs = {
+        "points": pts.astype(np.float64),
+        "faces": np.asarray(F, np.int32),
+        "n_surface": np.array(len(V)),
+        "switches": np.array(flags),
+        "check": np.array(check),
+        "check_only": np.array(check_only),
+    }
+    why, out = _in_child([_MESHER_CHILD, "tetgen"], inputs, [str(_memory_limit())], verbose)
+    if out is None:
+        raise RuntimeError(f"TetGen failed on this surface ({why})")
+    return out
 
 
 def _tetwild(
@@ -281,6 +263,13 @@ _STEINER_PER_POINT = 200
 _STEINER_MIN = 50_000
 # Address space of the Triangle child before meshing (Python, numpy, Triangle), in bytes.
 _CHILD_BASE_MEMORY = 1 << 30
+# The script the meshers run in (a child process, see its docstring).
+_MESHER_CHILD = os.path.join(os.path.dirname(__file__), "_mesher_child.py")
+
+
+def _memory_limit() -> int:
+    """Address space a mesher child may take: half of the machine's memory."""
+    return _checks.physical_memory() // 2
 
 
 def _steiner_budget(flags: str, n_points: int, given: str) -> tuple[str, int | None]:
@@ -319,12 +308,11 @@ def _triangle(
     switches, budget = _steiner_budget(_unit_switches(flags, ext**2), len(pts), given)
     # Triangle runs in a child process: crossing or nearly touching edges can make its quality
     # refinement loop (filling the memory) or crash; that becomes a ValueError here
-    limit = _checks.physical_memory() // 2
+    limit = _memory_limit()
     if budget is not None:  # room for the budget of vertices (~1 kB each in Triangle)
         limit = min(limit, _CHILD_BASE_MEMORY + 1000 * (len(pts) + budget))
-    child = os.path.join(os.path.dirname(__file__), "_triangle_child.py")
     inputs = {"vertices": U, "segments": segs.astype(np.int32), "switches": np.array(switches)}
-    why, out = _in_child([child], inputs, [str(limit)], verbose)
+    why, out = _in_child([_MESHER_CHILD, "triangle"], inputs, [str(limit)], verbose)
     if out is None:
         raise ValueError(
             f"V, F: Triangle failed on this domain ({why}); check the outline for "
@@ -332,4 +320,4 @@ def _triangle(
         )
     VV = _from_unit_box(out["vertices"].astype(np.float64), pts, U, lo, ext)
     reached = budget if budget is not None and len(VV) >= len(pts) + budget else None
-    return VV, out["triangles"].astype(np.int64), reached
+    return VV, out["elements"].astype(np.int64), reached

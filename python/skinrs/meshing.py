@@ -21,7 +21,13 @@ from numpy.typing import ArrayLike, NDArray
 
 from . import _checks, _skinrs
 from ._checks import Callback, as_points
-from ._external_meshers import _INSTALL, _self_intersects, _tetgen, _tetwild, _triangle
+from ._external_meshers import (
+    _INSTALL,
+    _self_intersects,  # noqa: F401 - tests reach it here
+    _tetgen,
+    _tetwild,
+    _triangle,
+)
 from ._meshing_checks import (  # noqa: F401
     _MAX_SAMPLES,
     _MESHER_SWITCHES,
@@ -158,8 +164,9 @@ def mesh_with_skeleton(
     ValueError
         A bone or point handle wholly outside the surface; handles spanning less than 1e-4 of
         the shape (C and V in different units); two points closer than 1e-12 of the extent
-        (double precision cannot keep them apart); a 2D domain Triangle fails on (it runs in a
-        child process); bad shapes or indices.
+        (double precision cannot keep them apart); a 2D domain Triangle fails on; bad shapes
+        or indices. (Triangle, TetGen and fTetWild run in a child process: a crash of theirs
+        is this error, or in 3D the fallback.)
     ImportError
         The meshing package is missing (``pip install skinrs[mesh]``), or TetGen failed and
         ``pytetwild`` is not installed.
@@ -265,9 +272,7 @@ def _tetgen_keeping_rows(
     """TetGen's ``(V_vol, T, None)`` when it keeps the surface vertices and the samples as the
     first rows, else ``(None, None, the error TetGen raised or None)``."""
     try:
-        if _self_intersects(V, F):
-            raise RuntimeError("the input surface has self-intersections")
-        Vv, T = _tetgen(V, F, Si, flags, verbose)
+        Vv, T = _tetgen(V, F, Si, flags, verbose, check=True)
     except ImportError:
         raise
     except Exception as e:  # noqa: BLE001 - TetGen raises RuntimeError and others
