@@ -3,6 +3,8 @@ result. Calls that once crashed the process run in a ``_sandbox`` worker."""
 
 from __future__ import annotations
 
+import os
+import signal
 import threading
 from concurrent.futures import ThreadPoolExecutor
 
@@ -154,19 +156,53 @@ def test_needle_outline(sandbox):
             assert "lie 1 apart" in raises_naming(out, "V rows 0 and 3")
 
 
+# A self-crossing outline on which Triangle's quality refinement loops, filling the memory
+# (17 GB in 2 minutes); it runs in a child process with a memory bound (a few seconds).
+LOOPING_OUTLINE = np.array(
+    [[-4.0274381813233449, 2.8656206815747471], [-2.4834839993864797e-3, -4.0672663772630688e-3],
+     [19.573146182101720, 5.8279162798843140], [-750.75201540134583, 347.29182527219450],
+     [-7.5294784516984443e-3, 5.4783709894190456e-3], [-3.1713384495036585e-4, 8.7272363983125466e-4],
+     [1.4283578719939157e-4, -2.2433194096868051e-5], [-1.6177871489921735e-2, -3.0183744660197136e-3]]
+)  # fmt: skip
+LOOPING_C = np.array([[0.21673101079154974, -0.01329912766410345],
+                      [0.4353071030618173, 0.44207591857555717],
+                      [0.22413942026274367, 0.8981862358742393]])  # fmt: skip
+
+
 def test_triangle_refinement_that_never_ends(sandbox):
-    # a self-crossing outline on which Triangle's quality refinement loops, filling the memory
-    # (17 GB in 2 minutes): it runs in a child process with a memory bound
-    V = np.array(
-        [[-4.0274381813233449, 2.8656206815747471], [-2.4834839993864797e-3, -4.0672663772630688e-3],
-         [19.573146182101720, 5.8279162798843140], [-750.75201540134583, 347.29182527219450],
-         [-7.5294784516984443e-3, 5.4783709894190456e-3], [-3.1713384495036585e-4, 8.7272363983125466e-4],
-         [1.4283578719939157e-4, -2.2433194096868051e-5], [-1.6177871489921735e-2, -3.0183744660197136e-3]]
-    )  # fmt: skip
-    C = np.array([[0.21673101079154974, -0.01329912766410345], [0.4353071030618173, 0.44207591857555717],
-                  [0.22413942026274367, 0.8981862358742393]])  # fmt: skip
-    out = sandbox.call("skinrs:mesh_with_skeleton", V, None, C, [[0, 1], [1, 2]])
+    out = sandbox.call(
+        "skinrs:mesh_with_skeleton", LOOPING_OUTLINE, None, LOOPING_C, [[0, 1], [1, 2]]
+    )
     assert "crossing" in raises_naming(out, "V, F")
+
+
+def _mesher_children() -> list[str]:
+    """Processes started by this one that run the mesher child script."""
+    found = []
+    for pid in filter(str.isdigit, os.listdir("/proc")):
+        try:
+            with open(f"/proc/{pid}/stat") as f:
+                ppid = int(f.read().rsplit(")", 1)[1].split()[1])
+            with open(f"/proc/{pid}/cmdline", "rb") as f:
+                cmd = f.read().decode(errors="replace")
+        except (OSError, ValueError, IndexError):
+            continue
+        if ppid == os.getpid() and "_mesher_child" in cmd:
+            found.append(pid)
+    return found
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc"), reason="reads child processes from /proc")
+def test_ctrl_c_stops_a_mesher_child():
+    # Ctrl-C during the looping Triangle run (seconds until its memory bound) kills the child
+    timer = threading.Timer(0.5, os.kill, (os.getpid(), signal.SIGINT))
+    timer.start()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            skinrs.mesh_with_skeleton(LOOPING_OUTLINE, None, LOOPING_C, [[0, 1], [1, 2]])
+    finally:
+        timer.cancel()
+    assert _mesher_children() == []
 
 
 def test_tetgen_heap_corruption_is_an_error(sandbox):
