@@ -50,7 +50,7 @@ from hypothesis.database import DirectoryBasedExampleDatabase
 
 PROFILE = os.environ.get("SKINRS_FUZZ", "ci")
 # examples per unit of Spec.weight
-PER_WEIGHT = {"ci": 18, "long": 320}[PROFILE]
+PER_WEIGHT = {"ci": 18, "long": 360}[PROFILE]
 TIMEOUT = float(os.environ.get("SKINRS_FUZZ_TIMEOUT", "30"))
 DATABASE = DirectoryBasedExampleDatabase(Path(__file__).parent / ".hypothesis" / "examples")
 
