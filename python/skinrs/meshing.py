@@ -117,8 +117,8 @@ def mesh_with_skeleton(
     (at least ``min_samples`` per bone, endpoints included); the samples and point handles
     ``C[P]`` are inserted as interior vertices: TetGen in 3D (flags ``"pq2Y"``: quality, surface
     kept), Triangle in 2D (bones as segments; flags ``"pq30Y"`` for an outline, ``"pY"`` for a
-    given triangle mesh, whose vertices are all kept and which is not refined). The input vertices keep their
-    indices: ``V_vol[:len(V)] == V``. If TetGen rejects the surface (self-intersections,
+    given triangle mesh, whose vertices are all kept and which is not refined). The input
+    vertices keep their indices: ``V_vol[:len(V)] == V``. If TetGen rejects the surface (self-intersections,
     holes) and ``pytetwild`` is installed, fTetWild meshes it instead (target edge length: the
     input's mean edge length), then TetGen meshes fTetWild's repaired boundary with the samples
     inserted exactly; if that fails too, the nearest interior fTetWild vertices are moved onto
@@ -464,8 +464,8 @@ def skin_weights(
     )
     n = len(Vin)
     # The meshers keep the input vertices as the first rows; only the fallback does not.
-    kept = Vv.shape[1] == Vin.shape[1] and np.array_equal(Vv[:n], Vin)
-    Ws = np.ascontiguousarray(W[:n]) if kept else _interpolate(Vin, Vv, T, W)
+    inputs_first = Vv.shape[1] == Vin.shape[1] and np.array_equal(Vv[:n], Vin)
+    Ws = np.ascontiguousarray(W[:n]) if inputs_first else _interpolate(Vin, Vv, T, W)
     out: list[Any] = [Ws]
     if return_mesh:
         out.append({"V": Vv, "T": T, "b": b, "bc": bc, "W": W})
@@ -474,7 +474,7 @@ def skin_weights(
             volume_vertices=len(Vv),
             volume_elements=len(T),
             time_meshing=t_mesh,
-            interpolated=not kept,
+            interpolated=not inputs_first,
             seconds=time.perf_counter() - t0,
         )
         out.append(info)
