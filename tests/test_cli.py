@@ -328,3 +328,13 @@ def test_ctrl_c_exits_130_and_writes_nothing(arm, tmp_path):
     assert proc.returncode == 130, err
     assert "interrupted" in err and "Traceback" not in err
     assert os.listdir(tmp_path) == []
+
+
+def test_progress_bar_reads_stage_then_percent(capsys):
+    from skinrs._cli_io import Progress, gap_progress
+
+    bar = Progress(False, 100.0, "%", gap_progress(1e-6))
+    bar("dual", 3, 1e-3)
+    bar.close()
+    err = capsys.readouterr().err
+    assert "\rdual: " in err and ": :" not in err, repr(err)

@@ -193,7 +193,8 @@ class Progress:
         except ImportError:
             self.bar = False
             return
-        fmt = "{desc}: {percentage:3.0f}%|{bar}| {elapsed}" if unit == "%" else None
+        # tqdm's {desc} already ends in ": " once a description is set.
+        fmt = "{desc}{percentage:3.0f}%|{bar}| {elapsed}" if unit == "%" else None
         self.bar = tqdm(total=total, unit=unit, file=sys.stderr, leave=False, bar_format=fmt)
 
     def __call__(self, stage: str, iteration: int, value: float) -> None:
