@@ -105,6 +105,36 @@ def test_weights_from_other_formats_and_to_weight_files(capsule, tmp_path):
     assert Ws.shape == (len(V), 2) and np.abs(Ws.sum(1) - 1).max() <= 1e-9
 
 
+def test_weights_of_a_surface_split_at_a_seam(capsule, tmp_path):
+    """Exporters split vertices at UV seams: the file's vertices that repeat a position get
+    the weights of the surface without the split, each one its point's."""
+    d, V = capsule
+    F = _faces_of(d / "capsule.off")
+    upper = V[F].mean(1)[:, 1] > 0  # faces of one half point at copies of their vertices
+    copied = np.unique(F[upper])
+    V2 = np.vstack([V, V[copied]])
+    F2 = F.copy()
+    F2[upper] = len(V) + np.searchsorted(copied, F[upper])
+    skinrs.io.write_obj(tmp_path / "whole.obj", V, F)
+    skinrs.io.write_obj(tmp_path / "split.obj", V2, F2)
+    W = {}
+    for name in ("whole", "split"):
+        run = skinrs_cli("weights", tmp_path / f"{name}.obj", d / "capsule.tgf",
+                         "-o", tmp_path / f"{name}.dmat")  # fmt: skip
+        assert run.returncode == 0, run.stderr
+        W[name] = skinrs.io.read_dmat(tmp_path / f"{name}.dmat")
+    assert f"merged {len(copied)} vertices" in run.stderr, run.stderr
+    assert W["split"].shape == (len(V2), 2)
+    np.testing.assert_allclose(W["split"][: len(V)], W["whole"], atol=1e-12)
+    np.testing.assert_array_equal(W["split"][len(V) :], W["split"][copied])
+
+
+def _faces_of(path):
+    import trimesh
+
+    return np.asarray(trimesh.load(path, process=False).faces, dtype=np.int64)
+
+
 def test_weights_with_k_influences(capsule, tmp_path):
     d, V = capsule
     run = skinrs_cli(

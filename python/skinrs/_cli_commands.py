@@ -153,13 +153,21 @@ def _solve_weights(
                               return_info=True)  # fmt: skip
             info["gap"], info["energy"] = res["relative_gap"], res["energy"]
             return W
+        from .io._weld import weld
         from .meshing import skin_weights
 
+        # Exporters split vertices at UV seams and sharp edges; the inside is meshed with one
+        # vertex per point, and every vertex of the file gets its point's weights back.
+        assert F is not None  # weights_job sends a point cloud to --method field only
+        Vw, Fw, vertex_map = weld(V, F)
+        if len(Vw) < len(V):
+            say(args, f"merged {len(V) - len(Vw)} vertices that repeat a position (and left "
+                      f"out {len(F) - len(Fw)} faces that collapsed)")  # fmt: skip
         say(args, "meshing the inside with the skeleton (TetGen) ...")
-        W, res = skin_weights(V, F, C, BE, P, tol=tol, callback=prog, return_info=True)
+        W, res = skin_weights(Vw, Fw, C, BE, P, tol=tol, callback=prog, return_info=True)
         info["gap"], info["energy"] = res["relative_gap"], res["energy"]
         info["volume_vertices"] = res["volume_vertices"]
-        return W
+        return W[vertex_map]
     finally:
         prog.close()
 

@@ -11,6 +11,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from . import gltf_rig as rig
+from .io._weld import weld
 
 if TYPE_CHECKING:
     import pygltflib
@@ -196,22 +197,16 @@ def _weld(
     V: NDArray[np.float64], F: NDArray[np.int64], W: NDArray[np.float64]
 ) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.float64], NDArray[np.int64]]:
     """Merges vertices at identical positions (split at UV seams / sharp edges by exporters)."""
-    _, first, inverse = np.unique(V, axis=0, return_index=True, return_inverse=True)
-    order = np.argsort(first)  # keep first-appearance order
-    rank = np.empty_like(order)
-    rank[order] = np.arange(len(order))
-    vmap = rank[inverse.reshape(-1)]
-    counts = np.bincount(vmap, minlength=len(order)).astype(np.float64)
-    Ww = np.zeros((len(order), W.shape[1]))
-    np.add.at(Ww, vmap, W)
-    Fw = vmap[F]
-    degenerate = (Fw[:, 0] == Fw[:, 1]) | (Fw[:, 1] == Fw[:, 2]) | (Fw[:, 0] == Fw[:, 2])
-    if degenerate.any():
+    Vw, Fw, vmap = weld(V, F)
+    if len(Fw) < len(F):
         warnings.warn(
-            f"welding made {int(degenerate.sum())} triangles degenerate; they are left out",
+            f"welding made {len(F) - len(Fw)} triangles degenerate; they are left out",
             stacklevel=3,
         )
-    return V[first[order]], Fw[~degenerate], Ww / counts[:, None], vmap
+    counts = np.bincount(vmap, minlength=len(Vw)).astype(np.float64)
+    Ww = np.zeros((len(Vw), W.shape[1]))
+    np.add.at(Ww, vmap, W)
+    return Vw, Fw, Ww / counts[:, None], vmap
 
 
 def _world(f: _File, local: NDArray[np.float64]) -> NDArray[np.float64]:
