@@ -213,10 +213,61 @@ def test_callback_can_stop_and_reports_progress():
     assert seen and seen[0][0] == "dual"
 
 
+def exact_energy(V, T, W):
+    """``1/2 tr(W^T L^T M^-1 L W)`` with libigl's ``L`` and Voronoi ``M`` (rescaled by its
+    largest entry), in exact rational arithmetic on their double entries."""
+    from fractions import Fraction
+
+    import igl
+
+    L = igl.cotmatrix(V, T).tocsr()
+    m = igl.massmatrix(V, T, igl.MASSMATRIX_TYPE_VORONOI).diagonal()
+    d = [Fraction(float(m.max())) / Fraction(float(x)) for x in m]
+    total = Fraction(0)
+    for w in W.T:
+        wq = [Fraction(float(x)) for x in w]
+        for i in range(len(V)):
+            cols, vals = (
+                L.indices[L.indptr[i] : L.indptr[i + 1]],
+                L.data[L.indptr[i] : L.indptr[i + 1]],
+            )
+            lw = sum((Fraction(float(v)) * wq[k] for k, v in zip(cols, vals)), Fraction(0))
+            total += d[i] * lw * lw
+    return float(total / 2)
+
+
+def test_certificate_is_exact_next_to_a_sliver():
+    # A free vertex 1e-7 from a constrained one (as when a bone sample lands next to a mesh
+    # vertex): the sliver's cotangent is ~1e7 and B's entries ~1e14, so energies summed through
+    # B keep no digit at the 1e-6 the gap is certified to. The reported energy must be the
+    # energy of the returned weights, and the lower bound must not exceed it.
+    V, T = grid(8)
+    c, k = 9, 10  # the edge 9-10 lies on two triangles of the grid
+    V = np.vstack([V, V[c] + 1e-7 * (V[k] - V[c]) / np.linalg.norm(V[k] - V[c])])
+    s = len(V) - 1
+    split = []
+    for t in T:
+        if c in t and k in t:
+            for old in (c, k):  # replace the edge (c, k) by (c, s) and (s, k)
+                split.append(np.where(t == old, s, t))
+        else:
+            split.append(t)
+    T = np.array(split)
+    b = np.array([0, 7, 63, c])
+    W, info = skinrs.bbw_dual_constrained(V, T, b, np.eye(4), tol=1e-8, return_info=True)
+    assert info["converged"]
+    E = exact_energy(V, T, W)
+    assert info["energy"] == pytest.approx(E, rel=1e-9)
+    assert info["lower_bound"] <= E * (1 + 1e-12)
+    assert (E - info["lower_bound"]) / E <= 1e-8
+
+
 def test_max_iter_warns_and_still_returns_feasible_weights():
     V, T = grid(12)
+    # Three handles: the unconstrained biharmonic weights go negative, so three iterations
+    # cannot certify the gap (with two corner handles they are the exact optimum at once).
     with pytest.warns(RuntimeWarning, match="duality gap"):
-        W = skinrs.bbw_dual_constrained(V, T, [0, 143], np.eye(2), tol=1e-14, max_iter=3)
+        W = skinrs.bbw_dual_constrained(V, T, [0, 143, 70], np.eye(3), tol=1e-14, max_iter=3)
     assert W.min() >= 0
     np.testing.assert_allclose(W.sum(1), 1, atol=1e-12)
 

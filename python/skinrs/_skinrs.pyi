@@ -30,10 +30,10 @@ def _connected_components(n: int, f: I64) -> tuple[int, I64]: ...
 # constraints and BBW
 def _boundary_conditions(v: F64, c: F64, p: I64, be: I64, tol: float) -> tuple[I64, F64]: ...
 def _bbw_dual(
-    b_data: F64,
-    b_indices: I64,
-    b_indptr: I64,
-    n: int,
+    l_data: F64,
+    l_indices: I64,
+    l_indptr: I64,
+    masses: F64,
     b: I64,
     bc: F64,
     *,

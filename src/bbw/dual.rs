@@ -14,7 +14,7 @@
 use rayon::prelude::*;
 
 use super::problem::EliminatedProblem;
-use super::vector::{self, dot};
+use super::vector::dot;
 
 /// One evaluation of a dual: objective, the recovered primal `W` (= gradient w.r.t. `Y`) and the
 /// certificate pieces.
@@ -50,14 +50,11 @@ pub fn pou_eval(p: &EliminatedProblem, y: &[f64]) -> DualPoint {
             .zip(x.par_iter())
             .map(|(a, b)| a + b)
             .collect();
-    let yx = dot(y, &x);
-    let yw0 = dot(y, &p.w0);
-    let objective = 0.5 * yx + yw0;
-    // Lagrangian at W(Y): uses A W = -G + Y P_m, so no extra product is needed.
-    let wg = dot(&w, &p.g);
-    let wy = yw0 + yx;
-    let ysum: f64 = vector::sum(y);
-    let lower_bound = 0.5 * wg - 0.5 * wy - ysum / (2.0 * m as f64) + p.c0;
+    let objective = 0.5 * dot(y, &x) + dot(y, &p.w0);
+    // The Lagrangian `E(W) - <Y, W>` at its minimiser W(Y) over the partition-of-unity plane.
+    // `E` is evaluated from W itself rather than through `A W = -G + Y P_m`: that shortcut sums
+    // terms as large as B's entries (see `energy`).
+    let lower_bound = p.energy(&w) - dot(&w, y);
     DualPoint {
         objective,
         w,
@@ -73,7 +70,8 @@ pub fn box_eval(p: &EliminatedProblem, y: &[f64], u: &[f64]) -> DualPoint {
     let w: Vec<f64> = p.w0.iter().zip(&x).map(|(a, b)| a + b).collect();
     let usum: f64 = u.iter().sum();
     let objective = 0.5 * dot(&ymu, &x) + dot(&p.w0, &ymu) + usum;
-    let lower_bound = 0.5 * dot(&w, &p.g) - 0.5 * dot(&w, &ymu) - usum + p.c0;
+    // The Lagrangian `E(W) - <Y - U, W> - sum U` at its minimiser W.
+    let lower_bound = p.energy(&w) - dot(&w, &ymu) - usum;
     DualPoint {
         objective,
         w,

@@ -15,6 +15,7 @@
 pub mod active_set;
 mod bounds;
 pub mod dual;
+mod energy;
 pub mod lbfgs;
 mod options;
 pub mod problem;
@@ -22,6 +23,7 @@ mod solve;
 mod squared_lbfgs;
 mod vector;
 
+pub use energy::LaplacianEnergy;
 pub use options::{BbwInfo, BbwOptions, Solver};
 pub use problem::EliminatedProblem;
 pub use solve::bbw_dual;

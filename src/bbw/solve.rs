@@ -34,12 +34,13 @@ pub fn bbw_dual(
     };
     if prob.nf() == 0 {
         // Every vertex is constrained: nothing to solve.
+        let energy = prob.energy(&[]);
         let dp = DualPoint {
             objective: 0.0,
             w: vec![],
-            lower_bound: prob.c0,
+            lower_bound: energy,
         };
-        best.update(&dp, vec![], prob.c0);
+        best.update(&dp, vec![], energy);
     } else {
         match opts.solver {
             Solver::LbfgsSquared => {

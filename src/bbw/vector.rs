@@ -29,12 +29,6 @@ pub fn dot(a: &[f64], b: &[f64]) -> f64 {
     ordered_sum(parts)[0]
 }
 
-/// `sum_i a_i`.
-pub fn sum(a: &[f64]) -> f64 {
-    let parts: Vec<[f64; 1]> = a.par_chunks(CHUNK).map(|x| [x.iter().sum()]).collect();
-    ordered_sum(parts)[0]
-}
-
 /// `y <- beta y + alpha x` (`y`'s old entries are not read when `beta` is 0), then returns
 /// `<z, y>` of the updated `y` (0 without `z`).
 pub fn update_dot(beta: f64, y: &mut [f64], alpha: f64, x: &[f64], z: Option<&[f64]>) -> f64 {
@@ -116,7 +110,6 @@ mod tests {
             .collect();
         let rel = |x: f64, y: f64| (x - y).abs() / y.abs().max(1e-300);
         assert!(rel(dot(&a, &b), serial_dot(&a, &b)) < 1e-12);
-        assert!(rel(sum(&b), b.iter().sum::<f64>()) < 1e-12);
 
         let mut y = a.clone();
         let d = update_dot(2.0, &mut y, -3.0, &b, Some(&a));

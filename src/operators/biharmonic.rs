@@ -31,13 +31,13 @@ pub fn biharmonic_matrix(
     biharmonic_from_parts(&l, &m)
 }
 
-/// `B = L^T diag(max(m) / m) L` for a symmetric `L` (as built by
-/// [`cotan_laplacian`]) and the lumped masses `m` (as from [`massmatrix`]).
+/// The diagonal `max(m) / m` of `B = L^T diag(max(m) / m) L` (the masses rescaled by their
+/// largest entry first), zero for the vertices with an empty column in `L` (unused, whose mass may
+/// be zero).
 ///
-/// The upper triangle is computed column by column (in parallel) as
-/// `B_ij = sum_k (max m / m_k) (L_ik L_kj)` and mirrored, so `B` is exactly symmetric. Vertices
-/// with an empty column in `L` (unused) may have zero mass.
-pub fn biharmonic_from_parts(l: &Csc, m: &[f64]) -> SkinResult<Csc> {
+/// Errors: `l` not square or `m` of another length; `Numerical` if a used vertex has a mass that
+/// is not positive and finite.
+pub fn scaled_inverse_masses(l: &Csc, m: &[f64]) -> SkinResult<Vec<f64>> {
     let n = l.ncols();
     if l.nrows() != n || m.len() != n {
         return Err(SkinError::InvalidInput(format!(
@@ -47,8 +47,7 @@ pub fn biharmonic_from_parts(l: &Csc, m: &[f64]) -> SkinResult<Csc> {
             m.len()
         )));
     }
-    let sym = l.symbolic();
-    let (col_ptr, row_idx, val) = (sym.col_ptr(), sym.row_idx(), l.val());
+    let col_ptr = l.symbolic().col_ptr();
     let max_m = m.iter().copied().fold(0.0, f64::max);
     let mut inv = vec![0.0; n];
     for k in 0..n {
@@ -65,6 +64,20 @@ pub fn biharmonic_from_parts(l: &Csc, m: &[f64]) -> SkinResult<Csc> {
             inv[k] = 1.0 / (m[k] / max_m);
         }
     }
+    Ok(inv)
+}
+
+/// `B = L^T diag(max(m) / m) L` for a symmetric `L` (as built by
+/// [`cotan_laplacian`]) and the lumped masses `m` (as from [`massmatrix`]).
+///
+/// The upper triangle is computed column by column (in parallel) as
+/// `B_ij = sum_k (max m / m_k) (L_ik L_kj)` and mirrored, so `B` is exactly symmetric. Vertices
+/// with an empty column in `L` (unused) may have zero mass.
+pub fn biharmonic_from_parts(l: &Csc, m: &[f64]) -> SkinResult<Csc> {
+    let n = l.ncols();
+    let inv = scaled_inverse_masses(l, m)?;
+    let sym = l.symbolic();
+    let (col_ptr, row_idx, val) = (sym.col_ptr(), sym.row_idx(), l.val());
 
     // Upper triangle (rows i <= j) of every column, in parallel (Gustavson's algorithm with a
     // branch-free "first visit" marker: every visit writes its row to `seen[count]`, and only a

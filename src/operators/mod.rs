@@ -13,7 +13,7 @@ mod cotan;
 mod elements;
 mod mass;
 
-pub use biharmonic::{biharmonic_from_parts, biharmonic_matrix};
+pub use biharmonic::{biharmonic_from_parts, biharmonic_matrix, scaled_inverse_masses};
 pub use components::connected_components;
 pub use cotan::cotan_laplacian;
 pub use elements::{check_elements, element_measures};

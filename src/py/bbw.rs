@@ -6,8 +6,9 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use super::{index_array, released, to_pyerr, Choices, PyProgress};
-use crate::bbw::{bbw_dual, BbwOptions, EliminatedProblem, Solver};
+use crate::bbw::{bbw_dual, BbwOptions, EliminatedProblem, LaplacianEnergy, Solver};
 use crate::constraints::{boundary_conditions, DEFAULT_TOL};
+use crate::operators::biharmonic_from_parts;
 use crate::sparse::Csc;
 
 const SOLVERS: Choices<Solver> = Choices(&[
@@ -37,8 +38,10 @@ fn py_boundary_conditions<'py>(
     Ok((b.into_pyarray(py), r.bc.into_pyarray(py)))
 }
 
-/// Rebuilds a CSC matrix from scipy's arrays (validated: sorted indices are not required).
+/// Rebuilds the square CSC matrix `name` from scipy's arrays (validated: sorted indices are not
+/// required).
 pub(crate) fn csc_from_parts(
+    name: &str,
     data: &[f64],
     indices: &[i64],
     indptr: &[i64],
@@ -49,23 +52,29 @@ pub(crate) fn csc_from_parts(
         || indices.len() != data.len()
         || *indptr.last().unwrap_or(&0) as usize != data.len()
     {
-        return Err(PyValueError::new_err("B is not a valid square CSC matrix"));
+        return Err(PyValueError::new_err(format!(
+            "{name} is not a valid square CSC matrix"
+        )));
     }
     let mut trip = Vec::with_capacity(data.len());
     for j in 0..n {
         let (s, e) = (indptr[j], indptr[j + 1]);
         if s < 0 || e < s || e as usize > data.len() {
-            return Err(PyValueError::new_err("B has an invalid column pointer"));
+            return Err(PyValueError::new_err(format!(
+                "{name} has an invalid column pointer"
+            )));
         }
         for k in s as usize..e as usize {
             let i = indices[k];
             if i < 0 || i as usize >= n {
                 return Err(PyValueError::new_err(format!(
-                    "B has row index {i} outside 0..{n}"
+                    "{name} has row index {i} outside 0..{n}"
                 )));
             }
             if !data[k].is_finite() {
-                return Err(PyValueError::new_err("B has a NaN or infinite entry"));
+                return Err(PyValueError::new_err(format!(
+                    "{name} has a NaN or infinite entry"
+                )));
             }
             trip.push(faer::sparse::Triplet::new(i as usize, j, data[k]));
         }
@@ -74,16 +83,16 @@ pub(crate) fn csc_from_parts(
 }
 
 #[pyfunction]
-#[pyo3(name = "_bbw_dual", signature = (b_data, b_indices, b_indptr, n, b, bc, *, solver, tol,
+#[pyo3(name = "_bbw_dual", signature = (l_data, l_indices, l_indptr, masses, b, bc, *, solver, tol,
                                         max_iter, partition_of_unity, seed, lbfgs_memory,
                                         callback))]
 #[allow(clippy::too_many_arguments)]
 fn py_bbw_dual<'py>(
     py: Python<'py>,
-    b_data: PyReadonlyArray1<'py, f64>,
-    b_indices: PyReadonlyArray1<'py, i64>,
-    b_indptr: PyReadonlyArray1<'py, i64>,
-    n: usize,
+    l_data: PyReadonlyArray1<'py, f64>,
+    l_indices: PyReadonlyArray1<'py, i64>,
+    l_indptr: PyReadonlyArray1<'py, i64>,
+    masses: PyReadonlyArray1<'py, f64>,
     b: PyReadonlyArray1<'py, i64>,
     bc: PyReadonlyArray2<'py, f64>,
     solver: &str,
@@ -94,10 +103,13 @@ fn py_bbw_dual<'py>(
     lbfgs_memory: usize,
     callback: Option<Py<PyAny>>,
 ) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, PyDict>)> {
-    let bmat = csc_from_parts(
-        b_data.as_slice()?,
-        b_indices.as_slice()?,
-        b_indptr.as_slice()?,
+    let masses = masses.as_slice()?.to_vec();
+    let n = masses.len();
+    let l = csc_from_parts(
+        "L",
+        l_data.as_slice()?,
+        l_indices.as_slice()?,
+        l_indptr.as_slice()?,
         n,
     )?;
     let b_idx: Vec<usize> = b
@@ -124,7 +136,9 @@ fn py_bbw_dual<'py>(
     };
     let mut progress = PyProgress::new(callback);
     let (w, info): (Array2<f64>, _) = released(py, || {
-        let prob = EliminatedProblem::new(&bmat, &b_idx, bc.view())?;
+        let bmat = biharmonic_from_parts(&l, &masses)?;
+        let prob = EliminatedProblem::new(&bmat, &b_idx, bc.view())?
+            .with_laplacian(LaplacianEnergy::new(l, &masses)?)?;
         bbw_dual(&prob, &opts, &mut progress)
     })?;
     let d = PyDict::new(py);
