@@ -145,6 +145,29 @@ def test_2d_triangle_mesh_keeps_its_vertices():
     assert T.shape[1] == 3 and len(np.unique(T)) == len(Vv)
 
 
+def test_2d_vertices_next_to_the_skeleton_become_its_samples():
+    # A joint 1e-7 from one vertex of the mesh and a bone passing 1e-7 from another: inserted
+    # as they are, each makes a sliver with a cotangent ~1e7 (B entries ~1e14), which slows
+    # the solve by orders of magnitude. Those vertices must hold the samples instead.
+    import igl
+
+    z = np.load(Path(__file__).resolve().parent / "reference" / "bar.npz")
+    V, F = z["V"], z["T"]
+    inner = np.flatnonzero(np.abs(V[:, 1]) < 0.1)
+    p = inner[np.argmin(np.linalg.norm(V[inner] - [-0.6, 0.0], axis=1))]
+    r = inner[np.argmin(np.linalg.norm(V[inner] - [0.0, 0.0], axis=1))]
+    C0 = V[p] + [1e-7, 0.0]
+    along = (V[r] - C0) / np.linalg.norm(V[r] - C0)
+    C1 = C0 + 2 * (V[r] + 1e-7 * np.array([-along[1], along[0]]) - C0)
+    Vv, T, b, bc = skinrs.mesh_with_skeleton(V, F, np.array([C0, C1]), np.array([[0, 1]]))
+    assert np.array_equal(Vv[: len(V)], V)
+    assert p in b and r in b
+    np.testing.assert_array_equal(bc, np.ones((len(b), 1)))
+    area = igl.doublearea(Vv, T) / 2
+    around = np.isin(T, [p, r]).any(axis=1)
+    assert area[around].min() >= 1e-2 * np.median(area)
+
+
 # ---------------------------------------------------------------------------------------------
 # Skeletons partly or wholly outside, missing packages, fallback mesher
 

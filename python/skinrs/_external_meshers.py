@@ -291,12 +291,13 @@ def _triangle(
     V: NDArray[Any],
     E: NDArray[Any],
     S: NDArray[Any],
-    seg_S: NDArray[Any],
+    seg: NDArray[Any],
     flags: str,
     verbose: bool,
 ) -> tuple[NDArray[Any], NDArray[Any], int | None]:
-    """Triangle's ``(V_vol, T, budget)``: ``budget`` is the bound on added vertices that it
-    reached (the quality switch was then not met everywhere), else None."""
+    """Triangle's ``(V_vol, T, budget)`` of the outline ``V, E`` with the points ``S`` and the
+    segments ``seg`` (indices into ``[V; S]``) inside: ``budget`` is the bound on added
+    vertices that it reached (the quality switch was then not met everywhere), else None."""
     if importlib.util.find_spec("triangle") is None:
         raise ImportError(f"mesh_with_skeleton needs Triangle in 2D: {_INSTALL}")
     given = flags
@@ -304,7 +305,7 @@ def _triangle(
         flags += "Q"
     pts = np.vstack([V, S])
     U, lo, ext = _to_unit_box(pts, len(V))
-    segs = np.vstack([E, seg_S + len(V)]) if len(seg_S) else E
+    segs = np.vstack([E, seg]) if len(seg) else E
     switches, budget = _steiner_budget(_unit_switches(flags, ext**2), len(pts), given)
     # Triangle runs in a child process: crossing or nearly touching edges can make its quality
     # refinement loop (filling the memory) or crash; that becomes a ValueError here

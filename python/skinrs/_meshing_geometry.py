@@ -43,21 +43,69 @@ def _rows_match(Vv: Arr, V: Arr, S: Arr) -> bool:
     return len(Vv) >= n + s and np.array_equal(Vv[:n], V) and np.array_equal(Vv[n : n + s], S)
 
 
-def _bone_segments(S: Arr, handles: Handles, insert: Arr, nP: int, nB: int) -> Arr:
-    """Segments between consecutive inserted samples of each bone (for Triangle)."""
-    pos = {int(r): k for k, r in enumerate(insert)}
+def _bone_segments(S: Arr, handles: Handles, vertex_of: Arr, nP: int, nB: int) -> Arr:
+    """Segments between consecutive samples of each bone (for Triangle), as pairs of vertices:
+    ``vertex_of[r]`` is the mesher's vertex of sample ``r`` (an input vertex it sits on, or its
+    inserted copy)."""
     segs = []
     for e in range(nB):
-        rows = [r for r, hs in enumerate(handles) if nP + e in hs and r in pos]
+        rows = [r for r, hs in enumerate(handles) if nP + e in hs]
         if len(rows) < 2:
             continue
         pts = S[rows]
         d = pts - pts[0]
         far = pts[np.argmax(np.linalg.norm(d, axis=1))] - pts[0]
         order = np.argsort(d @ far)
-        ids = [pos[rows[o]] for o in order]
-        segs += list(itertools.pairwise(ids))
+        ids = [int(vertex_of[rows[o]]) for o in order]
+        segs += [(a, b) for a, b in itertools.pairwise(ids) if a != b]
     return np.array(segs, np.int64).reshape(-1, 2)
+
+
+def _snap_to_vertices(
+    V: Arr, S: Arr, handles: Handles, C: Arr, BE: Arr | None, nP: int, tol: float
+) -> tuple[Arr, Handles, Arr]:
+    """The samples that sit on input vertices, and the input vertices that sit on bones.
+
+    A sample within ``tol`` of an input vertex is that vertex; an input vertex within ``tol`` of
+    a bone's inside becomes a sample of that bone. Left apart, either pair makes a sliver
+    whose cotangent is about ``spacing / tol`` (1e7 for a vertex 1e-7 from a bone): the
+    biharmonic matrix then holds entries 1e14 times its energy, and the solve slows down by
+    orders of magnitude.
+
+    Returns the samples (extended by the vertices on bones), their handles, and per sample the
+    input vertex it is (-1 for a sample to insert). Samples on one vertex share it (their
+    handle lists are merged).
+    """
+    from scipy.spatial import cKDTree
+
+    extra_S, extra_h = [], []
+    for e, (i, j) in enumerate(np.zeros((0, 2), np.int64) if BE is None else BE):
+        a, u = C[i], C[j] - C[i]
+        t = (V - a) @ u / max(float(u @ u), 1e-300)
+        dist = np.linalg.norm(V - (a + np.clip(t, 0, 1)[:, None] * u), axis=1)
+        for k in np.flatnonzero((dist <= tol) & (t > 0) & (t < 1)):
+            extra_S.append(V[k])
+            extra_h.append([nP + e])
+    if extra_S:
+        S = np.vstack([S, extra_S])
+        handles = handles + extra_h
+    d, nearest = cKDTree(V).query(S)
+    vertex = np.where(d <= tol, nearest, -1)
+    on_vertex: dict[int, list[int]] = {}
+    for q in np.flatnonzero(vertex >= 0).tolist():
+        on_vertex.setdefault(int(vertex[q]), []).extend(handles[q])
+    S_out, h_out, v_out = [], [], []
+    for r, k in enumerate(vertex.tolist()):
+        if k < 0:
+            S_out.append(S[r])
+            h_out.append(handles[r])
+        elif k in on_vertex:  # the first sample on vertex k stands for all of them
+            S_out.append(V[k])
+            h_out.append(sorted(set(on_vertex.pop(k))))
+        else:
+            continue
+        v_out.append(k)
+    return np.array(S_out, np.float64).reshape(-1, S.shape[1]), h_out, np.array(v_out, np.int64)
 
 
 def _interpolate(Q: Arr, Vv: Arr, T: Arr, W: Arr) -> Arr:

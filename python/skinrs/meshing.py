@@ -44,6 +44,7 @@ from ._meshing_geometry import (
     _bone_segments,
     _interpolate,
     _rows_match,
+    _snap_to_vertices,
     _winding_number,
 )
 from ._skeleton_sampling import _bc_matrix, _mean_edge_length, sample_skeleton
@@ -64,6 +65,9 @@ __all__ = [
 
 
 _BBW_DEFAULTS: dict[str, Any] = _skinrs.BBW_DEFAULTS
+#: A sample this close to an input vertex (relative to the sample spacing) is that vertex, and an
+#: input vertex this close to a bone is one of its samples.
+_SNAP = 1e-3
 
 
 class MeshingWarning(UserWarning):
@@ -117,7 +121,10 @@ def mesh_with_skeleton(
     (at least ``min_samples`` per bone, endpoints included); the samples and point handles
     ``C[P]`` are inserted as interior vertices: TetGen in 3D (flags ``"pq2Y"``: quality, surface
     kept), Triangle in 2D (bones as segments; flags ``"pq30Y"`` for an outline, ``"pY"`` for a
-    given triangle mesh, whose vertices are all kept and which is not refined). The input
+    given triangle mesh, whose vertices are all kept and which is not refined). A sample within
+    1e-3 of the sample spacing of an input vertex is that vertex, and an input vertex that close
+    to a bone is one of its samples (a mesh drawn around its skeleton has vertices on the bones;
+    kept apart, each such pair would be a sliver). The input
     vertices keep their indices: ``V_vol[:len(V)] == V``. If TetGen rejects the surface (self-intersections,
     holes) and ``pytetwild`` is installed, fTetWild meshes it instead (target edge length: the
     input's mean edge length), then TetGen meshes fTetWild's repaired boundary with the samples
@@ -205,18 +212,20 @@ def mesh_with_skeleton(
     inside = np.abs(_winding_number(Vd, boundary, S)) > 0.5
     S, handles = _keep_inside(S, handles, inside, nP, nB)
 
-    # a sample sitting on an input vertex is that vertex (inserting it again would be dropped
-    # by the mesher as a duplicate and shift every index after it)
+    # A sample on an input vertex is that vertex (inserting it again would be dropped by the
+    # mesher as a duplicate and shift every index after it); nearly on one, or an input vertex
+    # nearly on a bone, would make a sliver.
     scale = float(np.linalg.norm(Vd.max(0) - Vd.min(0)))
-    from scipy.spatial import cKDTree
-
-    d, nearest = cKDTree(Vd).query(S)
-    on_vertex = d <= 1e-12 * scale
+    spacing = rho / samples_per_edge
+    snap = max(_SNAP * spacing, 1e-12 * scale)
+    S, handles, vertex_of = _snap_to_vertices(Vd, S, handles, C, BE, nP, snap)
+    on_vertex = vertex_of >= 0
     insert = np.flatnonzero(~on_vertex)
     Si = S[insert]
+    vertex_of[insert] = len(Vd) + np.arange(len(insert))
 
     if planar:
-        Vv, T = _mesh_planar(Vd, F, boundary, S, handles, insert, nP, nB, flags, verbose)
+        Vv, T = _mesh_planar(Vd, F, boundary, S, handles, vertex_of, Si, nP, nB, flags, verbose)
     else:
         Vt, Tt, err = _tetgen_keeping_rows(V, boundary, Si, flags or "pq2Y", verbose)
         if Vt is None or Tt is None:
@@ -224,8 +233,7 @@ def mesh_with_skeleton(
             return fallback.mesh(V, boundary, S, Si, handles, nP + nB, scale, err)
         Vv, T = Vt, Tt
 
-    b = np.where(on_vertex, nearest, 0)
-    b[insert] = len(V) + np.arange(len(insert))
+    b = vertex_of
     bc = _bc_matrix(handles, nP + nB)
     if V.shape[1] == 3 and Vv.shape[1] == 2:
         Vv = np.c_[Vv, np.zeros(len(Vv))]
@@ -239,15 +247,16 @@ def _mesh_planar(
     E: Arr,
     S: Arr,
     handles: Handles,
-    insert: Arr,
+    vertex_of: Arr,
+    Si: Arr,
     nP: int,
     nB: int,
     flags: str | None,
     verbose: bool,
 ) -> tuple[Arr, Arr]:
-    """Triangle mesh of the 2D domain with the inserted samples as vertices, bones as segments."""
-    Si = S[insert]
-    seg = _bone_segments(S, handles, insert, nP, nB)
+    """Triangle mesh of the 2D domain with the inserted samples ``Si`` as vertices, bones as
+    segments (``vertex_of``: each sample's vertex in ``[Vd; Si]``)."""
+    seg = _bone_segments(S, handles, vertex_of, nP, nB)
     # An outline is refined to quality triangles; a given triangle mesh keeps its resolution
     # (refining around its interior vertices next to bone segments cascades to slivers).
     default = "pq30Y" if F is None or F.shape[1] == 2 else "pY"
