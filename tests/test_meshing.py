@@ -133,6 +133,24 @@ def test_2d_outline_bones_are_vertices_and_segments():
     assert abs(area - 7.0) < 1e-12
 
 
+def test_2d_vertices_triangle_adds_on_a_bone_are_held():
+    # An area bound far below the sample spacing makes Triangle split the bone segments; the
+    # vertices it adds there lie on the bone and must be constrained like its samples, or the
+    # bone's weight sags between them.
+    V = np.array([[0.0, 0], [4, 0], [4, 1], [0, 1]])
+    C = np.array([[0.5, 0.5], [3.5, 0.5]])
+    BE = np.array([[0, 1]])
+    Vv, _T, b, bc = skinrs.mesh_with_skeleton(V, None, C, BE, flags="pq30a0.001")
+    samples = expected_samples(C, BE, rho=2.5)  # the outline's mean edge length
+    t = np.clip((Vv - C[0]) @ (C[1] - C[0]) / 9.0, 0, 1)
+    on_bone = np.flatnonzero(np.linalg.norm(C[0] + t[:, None] * (C[1] - C[0]) - Vv, axis=1)
+                             < 1e-12)  # fmt: skip
+    assert len(on_bone) > 2 * len(samples)  # Triangle did add vertices on the bone
+    np.testing.assert_array_equal(np.sort(b), on_bone)
+    np.testing.assert_array_equal(bc, np.ones((len(b), 1)))
+    check_bc(Vv, b, bc, C, BE)
+
+
 def test_2d_triangle_mesh_keeps_its_vertices():
     z = np.load(Path(__file__).resolve().parent / "reference" / "bar.npz")  # made by `triangle`
     V, F = np.c_[z["V"], np.zeros(len(z["V"]))], z["T"]  # a z = 0 column, as in 2D OBJ files

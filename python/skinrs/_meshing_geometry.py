@@ -61,6 +61,20 @@ def _bone_segments(S: Arr, handles: Handles, vertex_of: Arr, nP: int, nB: int) -
     return np.array(segs, np.int64).reshape(-1, 2)
 
 
+def _points_on_bones(Q: Arr, C: Arr, BE: Arr | None, nP: int, tol: float) -> tuple[Arr, Handles]:
+    """The points of ``Q`` within ``tol`` of a bone's inside (its end joints excluded), in
+    increasing order, and per point the columns of the bones it lies on (``nP + bone``)."""
+    bones: dict[int, list[int]] = {}
+    for e, (i, j) in enumerate(np.zeros((0, 2), np.int64) if BE is None else BE):
+        a, u = C[i], C[j] - C[i]
+        t = (Q - a) @ u / max(float(u @ u), 1e-300)
+        dist = np.linalg.norm(Q - (a + np.clip(t, 0, 1)[:, None] * u), axis=1)
+        for k in np.flatnonzero((dist <= tol) & (t > 0) & (t < 1)).tolist():
+            bones.setdefault(k, []).append(nP + e)
+    rows = sorted(bones)
+    return np.array(rows, np.int64), [bones[k] for k in rows]
+
+
 def _snap_to_vertices(
     V: Arr, S: Arr, handles: Handles, C: Arr, BE: Arr | None, nP: int, tol: float
 ) -> tuple[Arr, Handles, Arr]:
@@ -78,17 +92,10 @@ def _snap_to_vertices(
     """
     from scipy.spatial import cKDTree
 
-    extra_S, extra_h = [], []
-    for e, (i, j) in enumerate(np.zeros((0, 2), np.int64) if BE is None else BE):
-        a, u = C[i], C[j] - C[i]
-        t = (V - a) @ u / max(float(u @ u), 1e-300)
-        dist = np.linalg.norm(V - (a + np.clip(t, 0, 1)[:, None] * u), axis=1)
-        for k in np.flatnonzero((dist <= tol) & (t > 0) & (t < 1)):
-            extra_S.append(V[k])
-            extra_h.append([nP + e])
-    if extra_S:
-        S = np.vstack([S, extra_S])
-        handles = handles + extra_h
+    on_bone, bones = _points_on_bones(V, C, BE, nP, tol)
+    if len(on_bone):
+        S = np.vstack([S, V[on_bone]])
+        handles = handles + bones
     d, nearest = cKDTree(V).query(S)
     vertex = np.where(d <= tol, nearest, -1)
     on_vertex: dict[int, list[int]] = {}

@@ -43,6 +43,7 @@ from ._meshing_geometry import (
     _as_2d,
     _bone_segments,
     _interpolate,
+    _points_on_bones,
     _rows_match,
     _snap_to_vertices,
     _winding_number,
@@ -124,15 +125,17 @@ def mesh_with_skeleton(
     given triangle mesh, whose vertices are all kept and which is not refined). A sample within
     1e-3 of the sample spacing of an input vertex is that vertex, and an input vertex that close
     to a bone is one of its samples (a mesh drawn around its skeleton has vertices on the bones;
-    kept apart, each such pair would be a sliver). The input
-    vertices keep their indices: ``V_vol[:len(V)] == V``. If TetGen rejects the surface (self-intersections,
-    holes) and ``pytetwild`` is installed, fTetWild meshes it instead (target edge length: the
-    input's mean edge length), then TetGen meshes fTetWild's repaired boundary with the samples
-    inserted exactly; if that fails too, the nearest interior fTetWild vertices are moved onto
-    the samples (a move that would invert a tet is not made; the next nearest vertex is tried),
-    and a sample none of whose nearby vertices can move is inserted as a new vertex. Either way
-    a :class:`MeshingWarning` says so (the snapping one reports the largest move), and the
-    surface rows no longer match ``V`` (:func:`skin_weights` then interpolates).
+    kept apart, each such pair would be a sliver). A vertex Triangle adds on a bone segment (it
+    splits segments to meet its quality and area bounds) is held like the bone's samples. The
+    input vertices keep their indices: ``V_vol[:len(V)] == V``. If TetGen rejects the surface
+    (self-intersections, holes) and ``pytetwild`` is installed, fTetWild meshes it instead
+    (target edge length: the input's mean edge length), then TetGen meshes fTetWild's repaired
+    boundary with the samples inserted exactly; if that fails too, the nearest interior
+    fTetWild vertices are moved onto the samples (a move that would invert a tet is not made;
+    the next nearest vertex is tried), and a sample none of whose nearby vertices can move is
+    inserted as a new vertex. Either way a :class:`MeshingWarning` says so (the snapping one
+    reports the largest move), and the surface rows no longer match ``V`` (:func:`skin_weights`
+    then interpolates).
 
     Parameters
     ----------
@@ -226,6 +229,12 @@ def mesh_with_skeleton(
 
     if planar:
         Vv, T = _mesh_planar(Vd, F, boundary, S, handles, vertex_of, Si, nP, nB, flags, verbose)
+        # Triangle splits bone segments to meet its quality and area bounds: the vertices it
+        # adds there lie on the bone and are held like its samples.
+        added = len(Vd) + len(Si)
+        on_bone, bones = _points_on_bones(Vv[added:], C, BE, nP, snap)
+        vertex_of = np.concatenate([vertex_of, added + on_bone])
+        handles = handles + bones
     else:
         Vt, Tt, err = _tetgen_keeping_rows(V, boundary, Si, flags or "pq2Y", verbose)
         if Vt is None or Tt is None:
