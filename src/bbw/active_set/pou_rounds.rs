@@ -34,6 +34,9 @@ const CG_TOL_FINAL: f64 = 1e-2;
 /// A round whose gap fell by less than this factor crawls, and the next one dilates its joins
 /// ([`next_support`]).
 const CRAWL: f64 = 4.0;
+/// Rounds without dilation after a dilated round raised the upper bound; twice as many after
+/// each further such round.
+const DILATION_PAUSE: usize = 3;
 
 /// The rounds' state, kept across an L-BFGS intermission: the support guess
 /// (`support[j * nf + i]`), the partition-of-unity multiplier, the CG tolerance and what
@@ -45,11 +48,12 @@ pub(super) struct RoundsState {
     dilation: Dilation,
 }
 
-/// The last round's own bounds, whether its joins were dilated, and whether dilation is still
-/// allowed.
+/// The last round's own bounds, whether its joins were dilated, and the pause of dilation: none
+/// before round `paused_until`, and the length of the next pause.
 #[derive(Clone, Copy)]
 struct Dilation {
-    allowed: bool,
+    paused_until: usize,
+    next_pause: usize,
     last_dilated: bool,
     last_gap: f64,
     last_upper: f64,
@@ -75,7 +79,8 @@ impl RoundsState {
             mu: vec![0.0; nf],
             cg_tol: CG_TOL_FIRST,
             dilation: Dilation {
-                allowed: true,
+                paused_until: 0,
+                next_pause: DILATION_PAUSE,
                 last_dilated: false,
                 last_gap: f64::INFINITY,
                 last_upper: f64::INFINITY,
@@ -99,6 +104,8 @@ pub(super) fn pou_rounds(
     let mut gap_watch = StallWatch::new(best.relative_gap());
     let mut own_bounds = OwnBounds::new();
     let budget = opts.max_iter.min(MAX_ROUNDS).saturating_sub(info.rounds);
+    // After a dilated round: the support and `mu` the round would have gone on with undilated.
+    let mut undilated: Option<(Vec<bool>, Vec<f64>)> = None;
     for _ in 0..budget {
         let round = info.rounds;
         info.rounds += 1;
@@ -191,18 +198,33 @@ pub(super) fn pou_rounds(
             return Ok(Outcome::Done);
         }
         // A gap that fell by less than a factor CRAWL in a round means the supports' edges
-        // crawl: the joins then bring their neighbourhoods along. If a dilated round raised
-        // the upper bound, dilation overshoots on this problem (it can make the supports
-        // cycle): never again.
+        // crawl: the joins then bring their neighbourhoods along. A dilated round that raised
+        // the upper bound overshot: dilating again at once makes the supports cycle, so it
+        // pauses, longer each time. Never dilating again leaves far-reaching supports (few
+        // bones: every weight positive on most of the mesh) to crawl a ring per round. If the
+        // overshoot also widened the gap, its weights dip negative over wide bands, and
+        // going on from it costs more rounds than it saves: the round is undone.
         if dilation.last_dilated && upper > dilation.last_upper {
-            dilation.allowed = false;
+            dilation.paused_until = round.saturating_add(dilation.next_pause);
+            dilation.next_pause = dilation.next_pause.saturating_mul(2);
+            let widened = own_gap > dilation.last_gap;
+            if let Some((plain, plain_mu)) = undilated.take().filter(|_| widened) {
+                *support = plain;
+                *mu = plain_mu;
+                dilation.last_dilated = false;
+                continue;
+            }
         }
-        let dilate = dilation.allowed && own_gap > dilation.last_gap / CRAWL;
+        let dilate = round >= dilation.paused_until && own_gap > dilation.last_gap / CRAWL;
         dilation.last_dilated = dilate;
         dilation.last_gap = own_gap;
         dilation.last_upper = upper;
         let thresholds = SignThresholds::new(opts.tol, scale);
         let (next, n_w, n_y) = next_support(&prob.a, support, &w, &y, thresholds, dilate, nf);
+        undilated = dilate.then(|| {
+            let (plain, _, _) = next_support(&prob.a, support, &w, &y, thresholds, false, nf);
+            (plain, mu.clone())
+        });
         let exact = n_w == 0 && n_y == 0;
         if exact && *cg_tol <= CG_TOL_FINAL * opts.tol {
             // Every KKT sign holds and PoU to round-off: this is the optimum; the gap is as
