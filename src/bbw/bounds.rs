@@ -30,14 +30,14 @@ impl CertifiedBounds {
             max_raw: f64::NAN,
         }
     }
-    /// Records the dual point's lower bound and, if it is better, the projected primal.
-    pub fn update(&mut self, dp: &DualPoint, feasible: Vec<f64>, upper: f64) {
-        self.bound(dp);
+    /// Records the dual point's lower bound `lower` and, if it is better, the projected primal.
+    pub fn update(&mut self, dp: &DualPoint, lower: f64, feasible: Vec<f64>, upper: f64) {
+        self.bound(dp, lower);
         self.offer(&dp.w, feasible, upper);
     }
-    /// Records the dual point's lower bound only.
-    pub fn bound(&mut self, dp: &DualPoint) {
-        self.lower = self.lower.max(dp.lower_bound);
+    /// Records the dual point's lower bound `lower` ([`DualPoint::lower_bound`]) only.
+    pub fn bound(&mut self, dp: &DualPoint, lower: f64) {
+        self.lower = self.lower.max(lower);
         self.dual_objective = dp.objective;
     }
     /// Records a feasible point (projected from `raw`) if its energy is lower.

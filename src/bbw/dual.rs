@@ -16,15 +16,25 @@ use rayon::prelude::*;
 use super::problem::EliminatedProblem;
 use super::vector::dot;
 
-/// One evaluation of a dual: objective, the recovered primal `W` (= gradient w.r.t. `Y`) and the
-/// certificate pieces.
+/// One evaluation of a dual: objective, the recovered primal `W` (= gradient w.r.t. `Y`) and what
+/// its lower bound needs besides `W`'s energy.
 pub struct DualPoint {
     /// Dual objective `f` (to be minimised).
     pub objective: f64,
     /// Recovered primal free rows `W`, `nf x m` column-major (may be slightly infeasible).
     pub w: Vec<f64>,
-    /// Lower bound on the optimal energy (the Lagrangian at this dual point).
-    pub lower_bound: f64,
+    /// The Lagrangian's multiplier terms at `W`: the lower bound is `E(W) - multiplier_terms`.
+    multiplier_terms: f64,
+}
+
+impl DualPoint {
+    /// The Lagrangian at this dual point, a lower bound on the optimal energy. It costs an
+    /// energy evaluation, so the dual's evaluations leave it to the certificates that need it.
+    pub fn lower_bound(&self, p: &EliminatedProblem) -> f64 {
+        // `E` is evaluated from W itself rather than through `A W = -G + Y P_m`: that shortcut
+        // sums terms as large as B's entries (see `energy`).
+        p.energy(&self.w) - self.multiplier_terms
+    }
 }
 
 /// Evaluates the partition-of-unity dual at `y` (`nf x m`, `y >= 0`).
@@ -52,13 +62,11 @@ pub fn pou_eval(p: &EliminatedProblem, y: &[f64]) -> DualPoint {
             .collect();
     let objective = 0.5 * dot(y, &x) + dot(y, &p.w0);
     // The Lagrangian `E(W) - <Y, W>` at its minimiser W(Y) over the partition-of-unity plane.
-    // `E` is evaluated from W itself rather than through `A W = -G + Y P_m`: that shortcut sums
-    // terms as large as B's entries (see `energy`).
-    let lower_bound = p.energy(&w) - dot(&w, y);
+    let multiplier_terms = dot(&w, y);
     DualPoint {
         objective,
         w,
-        lower_bound,
+        multiplier_terms,
     }
 }
 
@@ -71,11 +79,11 @@ pub fn box_eval(p: &EliminatedProblem, y: &[f64], u: &[f64]) -> DualPoint {
     let usum: f64 = u.iter().sum();
     let objective = 0.5 * dot(&ymu, &x) + dot(&p.w0, &ymu) + usum;
     // The Lagrangian `E(W) - <Y - U, W> - sum U` at its minimiser W.
-    let lower_bound = p.energy(&w) - dot(&w, &ymu) - usum;
+    let multiplier_terms = dot(&w, &ymu) + usum;
     DualPoint {
         objective,
         w,
-        lower_bound,
+        multiplier_terms,
     }
 }
 

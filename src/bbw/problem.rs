@@ -190,27 +190,22 @@ impl EliminatedProblem {
     /// Full energy `1/2 tr(W^T B W)` of the weights whose free rows are `wf` (`nf x m`).
     pub fn energy(&self, wf: &[f64]) -> f64 {
         match &self.laplacian {
-            Some(l) => {
-                // Collected before summing, so the result does not depend on the scheduling.
-                let per_column: Vec<f64> = (0..self.m)
-                    .into_par_iter()
-                    .map(|c| l.column_energy(&self.full_column(wf, c)))
-                    .collect();
-                per_column.iter().sum()
-            }
+            Some(l) => l.energy(&self.full_rows(wf), self.m),
             None => self.matrix_energy(wf),
         }
     }
 
-    /// Column `c` of the full weights: `wf`'s column on the free rows, `bc`'s on `b`.
-    fn full_column(&self, wf: &[f64], c: usize) -> Vec<f64> {
-        let nf = self.nf();
-        let mut w = vec![0.0; self.n];
+    /// The full weights, `n x m` row by row: `wf`'s rows on the free vertices, `bc`'s on `b`.
+    fn full_rows(&self, wf: &[f64]) -> Vec<f64> {
+        let (nf, m) = (self.nf(), self.m);
+        let mut w = vec![0.0; self.n * m];
         for (k, &i) in self.free.iter().enumerate() {
-            w[i] = wf[c * nf + k];
+            for c in 0..m {
+                w[i * m + c] = wf[c * nf + k];
+            }
         }
         for (r, &i) in self.b.iter().enumerate() {
-            w[i] = self.bc[r * self.m + c];
+            w[i * m..(i + 1) * m].copy_from_slice(&self.bc[r * m..(r + 1) * m]);
         }
         w
     }

@@ -5,7 +5,6 @@ use std::time::Instant;
 use ndarray::Array2;
 
 use super::bounds::CertifiedBounds;
-use super::dual::DualPoint;
 use super::options::{BbwInfo, BbwOptions, Solver};
 use super::problem::EliminatedProblem;
 use super::squared_lbfgs::{random_start, run_lbfgs};
@@ -35,12 +34,9 @@ pub fn bbw_dual(
     if prob.nf() == 0 {
         // Every vertex is constrained: nothing to solve.
         let energy = prob.energy(&[]);
-        let dp = DualPoint {
-            objective: 0.0,
-            w: vec![],
-            lower_bound: energy,
-        };
-        best.update(&dp, vec![], energy);
+        best.lower = energy;
+        best.dual_objective = 0.0;
+        best.offer(&[], vec![], energy);
     } else {
         match opts.solver {
             Solver::LbfgsSquared => {

@@ -71,14 +71,15 @@ pub(crate) fn run_lbfgs(
         max_iter: opts.max_iter,
     };
     let iterations = minimize(&mut u, &lopts, fg, |it, _x, _f, _g| {
-        // The certificate costs a sparse product; checking it every few iterations keeps the
-        // stop at most GAP_EVERY - 1 iterations late.
+        // The certificate costs a projection and two energy evaluations (the projected primal's
+        // and the dual's lower bound); checking it every few iterations keeps the stop at most
+        // GAP_EVERY - 1 iterations late.
         if it % GAP_EVERY == 0 {
             let dp = last.borrow();
             let dp = dp.as_ref().expect("objective evaluated before monitor");
             let feasible = project(opts, &dp.w, nf, m);
             let upper = prob.energy(&feasible);
-            best.update(dp, feasible, upper);
+            best.update(dp, dp.lower_bound(prob), feasible, upper);
         }
         progress.report(Event {
             stage: "dual",
@@ -95,7 +96,7 @@ pub(crate) fn run_lbfgs(
     if let Some(dp) = last.borrow_mut().take() {
         let feasible = project(opts, &dp.w, nf, m);
         let upper = prob.energy(&feasible);
-        best.update(&dp, feasible, upper);
+        best.update(&dp, dp.lower_bound(prob), feasible, upper);
     }
     info.iterations += iterations;
     info.evaluations += evaluations;

@@ -97,7 +97,8 @@ pub(super) fn box_rounds(
         // stalls and an L-BFGS fallback has to finish.
         spread_negative(&mut y, &prob.a, nf);
         spread_negative(&mut u, &prob.a, nf);
-        best.bound(&box_eval(prob, &y, &u));
+        let dp = box_eval(prob, &y, &u);
+        best.bound(&dp, dp.lower_bound(prob));
         progress.report(Event {
             stage: "active-set",
             iteration: round,

@@ -185,9 +185,9 @@ pub(super) fn pou_rounds(
         let mut y_plus = y.clone();
         spread_negative(&mut y_plus, &prob.a, nf);
         let own = pou_eval(prob, &y_plus);
-        let own_lower = own.lower_bound;
+        let own_lower = own.lower_bound(prob);
         let own_gap = (upper - own_lower) / upper.abs().max(1e-300);
-        best.bound(&own);
+        best.bound(&own, own_lower);
         progress.report(Event {
             stage: "active-set",
             iteration: round,
