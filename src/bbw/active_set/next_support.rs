@@ -63,8 +63,9 @@ pub(super) fn next_support(
         .with_max_len(1)
         .map(|(col, ((nx, sup), (wc, yc)))| {
             let leaving = |i: usize| sup[i] && wc[i] < th.leave_below;
-            let d_edge = graph_distance(a, sup, |i| !sup[i]);
-            let d_kept = graph_distance(a, sup, |i| sup[i] && !leaving(i));
+            let band: Vec<usize> = (0..nf).filter(|&i| leaving(i)).collect();
+            let d_edge = band_distance(a, &band, leaving, |i| !sup[i], nf);
+            let d_kept = band_distance(a, &band, leaving, |i| sup[i] && !leaving(i), nf);
             let (mut negative, mut joined) = (0, 0);
             for i in 0..nf {
                 if leaving(i) {
@@ -123,19 +124,38 @@ fn row_joiners(support: &[bool], y: &[f64], join_below: f64, nf: usize) -> Vec<u
         .collect()
 }
 
-/// Steps in the graph of `A`, moving only through `inside` vertices, from the nearest vertex
-/// where `source` holds (`usize::MAX` where none is reachable).
-fn graph_distance(a: &Csc, inside: &[bool], source: impl Fn(usize) -> bool) -> Vec<usize> {
-    let n = inside.len();
+/// Steps in the graph of `A` from the nearest vertex where `source` holds to each vertex of
+/// `band` (where `in_band` holds), moving through `band` only; `usize::MAX` elsewhere and where
+/// none is reachable.
+///
+/// A negative band's entries compare their distances to the support's edge and to its kept
+/// part, each measured inside the support. Paths through the band alone give the same
+/// comparison at a fraction of the cost (the band is a few entries of a support): a shortest
+/// path from the kept part has only its source outside the band, and one from the edge that
+/// crosses the kept part is longer than the distance from the kept part, as is its band-only
+/// counterpart.
+fn band_distance(
+    a: &Csc,
+    band: &[usize],
+    in_band: impl Fn(usize) -> bool,
+    source: impl Fn(usize) -> bool,
+    n: usize,
+) -> Vec<usize> {
     let mut d = vec![usize::MAX; n];
     let mut queue = std::collections::VecDeque::new();
-    for i in (0..n).filter(|&i| source(i)) {
-        d[i] = 0;
-        queue.push_back(i);
+    for &i in band {
+        if a.symbolic()
+            .row_idx_of_col_raw(i)
+            .iter()
+            .any(|&j| source(j))
+        {
+            d[i] = 1;
+            queue.push_back(i);
+        }
     }
     while let Some(i) = queue.pop_front() {
         for &j in a.symbolic().row_idx_of_col_raw(i) {
-            if inside[j] && d[j] == usize::MAX {
+            if d[j] == usize::MAX && in_band(j) {
                 d[j] = d[i] + 1;
                 queue.push_back(j);
             }
@@ -150,11 +170,18 @@ mod tests {
     use crate::sparse::path_matrix;
 
     #[test]
-    fn graph_distance_stays_inside() {
+    fn band_distance_moves_through_the_band_only() {
         let a = path_matrix(6);
-        let inside = [true, true, false, true, true, true];
-        let d = graph_distance(&a, &inside, |i| i == 0 || i == 5);
-        assert_eq!(d, vec![0, 1, usize::MAX, 2, 1, 0]);
+        let in_band = |i: usize| (1..=3).contains(&i);
+        let band = [1, 2, 3];
+        let none = usize::MAX;
+        let d = band_distance(&a, &band, in_band, |i| i == 0, 6);
+        assert_eq!(d, vec![none, 1, 2, 3, none, none]);
+        let d = band_distance(&a, &band, in_band, |i| i == 4, 6);
+        assert_eq!(d, vec![none, 3, 2, 1, none, none]);
+        // Vertex 4 is neither in the band nor a source: 5 does not reach the band.
+        let d = band_distance(&a, &band, in_band, |i| i == 5, 6);
+        assert_eq!(d, vec![none; 6]);
     }
 
     #[test]
