@@ -236,6 +236,19 @@ def exact_energy(V, T, W):
     return float(total / 2)
 
 
+def test_every_vertex_constrained_returns_bc_with_its_exact_energy():
+    # Nothing is free: the weights are bc, and both bounds are bc's energy.
+    V, T = grid(4)
+    bc = np.random.default_rng(3).random((16, 3))
+    bc /= bc.sum(1, keepdims=True)
+    W, info = skinrs.bbw_dual_constrained(V, T, np.arange(16), bc, return_info=True)
+    np.testing.assert_array_equal(W, bc)
+    assert info["converged"] and info["gap"] == 0.0
+    assert info["lower_bound"] == info["energy"]
+    e = exact_energy(V, T, bc)
+    assert abs(info["energy"] - e) <= 1e-12 * e, (info["energy"], e)
+
+
 def test_certificate_is_exact_next_to_a_sliver():
     # A free vertex 1e-7 from a constrained one (as when a bone sample lands next to a mesh
     # vertex): the sliver's cotangent is ~1e7 and B's entries ~1e14, so energies summed through
