@@ -75,11 +75,12 @@ pub(crate) fn run_lbfgs(
         // and the dual's lower bound); checking it every few iterations keeps the stop at most
         // GAP_EVERY - 1 iterations late.
         if it % GAP_EVERY == 0 {
-            let dp = last.borrow();
-            let dp = dp.as_ref().expect("objective evaluated before monitor");
+            // Taken, so that the certificate after the loop is not computed again for it.
+            let dp = last.borrow_mut().take();
+            let dp = dp.expect("objective evaluated before monitor");
             let feasible = project(opts, &dp.w, nf, m);
             let upper = prob.energy(&feasible);
-            best.update(dp, dp.lower_bound(prob), feasible, upper);
+            best.update(&dp, dp.lower_bound(prob), feasible, upper);
         }
         progress.report(Event {
             stage: "dual",
@@ -92,7 +93,7 @@ pub(crate) fn run_lbfgs(
             Step::Continue
         })
     })?;
-    // Certify the final iterate too (the loop may end between two gap checks).
+    // Certify the final iterate too if the loop ended between two gap checks.
     if let Some(dp) = last.borrow_mut().take() {
         let feasible = project(opts, &dp.w, nf, m);
         let upper = prob.energy(&feasible);
