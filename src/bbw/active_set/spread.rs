@@ -37,10 +37,36 @@ pub(super) fn spread_negative(y: &mut [f64], a: &Csc, nf: usize) {
             }
             let mut deficit = -col[k];
             col[k] = 0.0;
+            // The first ring is `k`'s row of `A` without `k`: most deficits are paid there,
+            // so it is scanned in place, and marked for the outer rings only when some remains.
+            let first = a.symbolic().row_idx_of_col_raw(k);
+            let pos: f64 = first
+                .iter()
+                .filter(|&&i| i != k)
+                .map(|&i| col[i].max(0.0))
+                .sum();
+            if pos > 0.0 {
+                let take = deficit.min(pos);
+                let keep = 1.0 - take / pos;
+                for &i in first {
+                    if i != k && col[i] > 0.0 {
+                        col[i] *= keep;
+                    }
+                }
+                deficit -= take;
+            }
+            if deficit <= 0.0 {
+                continue;
+            }
             stamp[k] = k;
             ring.clear();
-            ring.push(k);
-            for _ in 0..REACH {
+            for &i in first {
+                if i != k {
+                    stamp[i] = k;
+                    ring.push(i);
+                }
+            }
+            for _ in 1..REACH {
                 if deficit <= 0.0 || ring.is_empty() {
                     break;
                 }
