@@ -1,5 +1,6 @@
 //! The one error type of the crate. The Python layer maps each variant to an exception:
-//! `InvalidInput` -> `ValueError`, `Interrupted` -> `KeyboardInterrupt`, `Numerical` -> `RuntimeError`.
+//! `InvalidInput` -> `ValueError`, `Interrupted` -> `KeyboardInterrupt`, `Numerical` -> `RuntimeError`,
+//! `OutOfMemory` -> `MemoryError`.
 
 use std::fmt;
 
@@ -11,6 +12,9 @@ pub enum SkinError {
     Interrupted,
     /// A factorisation or solver failed on data that passed validation.
     Numerical(String),
+    /// A computation would allocate more than the memory it was given; the message says how
+    /// much and which argument sets the limit.
+    OutOfMemory(String),
 }
 
 pub type SkinResult<T> = Result<T, SkinError>;
@@ -20,7 +24,7 @@ impl fmt::Display for SkinError {
         match self {
             SkinError::InvalidInput(s) => write!(f, "{s}"),
             SkinError::Interrupted => write!(f, "interrupted"),
-            SkinError::Numerical(s) => write!(f, "{s}"),
+            SkinError::Numerical(s) | SkinError::OutOfMemory(s) => write!(f, "{s}"),
         }
     }
 }

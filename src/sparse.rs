@@ -6,7 +6,9 @@ use faer::Side;
 
 use crate::error::{SkinError, SkinResult};
 
+mod llt_plan;
 mod tree_llt;
+pub(crate) use llt_plan::{LltPlan, SparseLlt};
 pub(crate) use tree_llt::TreeLlt;
 
 /// Compressed sparse column matrix with `usize` indices, the crate's one sparse type.

@@ -158,6 +158,54 @@ def test_no_pou_reproduces_libigl_test_oracle(data_dir, solver):
     np.testing.assert_allclose(Wn.sum(1), 1, atol=1e-12)
 
 
+def test_memory_limit_below_the_factor_of_b_ff_raises_memory_error():
+    # The factor's size is known from its symbolic analysis: nothing is allocated or computed.
+    f = load("bar")
+    with pytest.raises(MemoryError, match=r"memory_limit: the Cholesky factor of B_ff"):
+        skinrs.bbw_dual_constrained(f["V"], f["T"], f["b"], f["bc"], memory_limit=100_000)
+
+
+def test_support_factors_beyond_memory_limit_hand_over_to_lbfgs():
+    """The active set holds one support factor per column; when memory_limit leaves less than
+    they take, L-BFGS on the dual (which needs only B_ff's factor) reaches the same certified
+    tol, with a warning, and the weights match the independent optimum."""
+    f = load("bar")
+    args = (f["V"], f["T"], f["b"], f["bc"])
+    kw = {"mass": str(f["mass_kind"]), "tol": 1e-8, "return_info": True}
+    _, full = skinrs.bbw_dual_constrained(*args, **kw)
+    assert not full["memory_fallback"] and full["fallbacks"] == 0
+    assert full["factor_bytes"] > 0 and full["support_factor_bytes"] > 0
+    held = full["factor_bytes"] + full["vector_bytes"]
+    with pytest.warns(RuntimeWarning, match="support factors need .* L-BFGS"):
+        W, info = skinrs.bbw_dual_constrained(
+            *args, memory_limit=held + full["support_factor_bytes"] // 2, **kw
+        )
+    assert info["memory_fallback"] and info["fallbacks"] == 1, info
+    # The first round's factors did not fit: no round ran, L-BFGS went on to tol.
+    assert info["rounds"] == 0 and info["converged"] and info["relative_gap"] <= 1e-8
+    assert info["iterations"] > full["iterations"]
+    dW, relE = against_qp(f, W, info)
+    assert abs(relE) <= 1e-7 and dW <= 1e-4
+    assert_feasible(W, f)
+
+
+def test_box_variant_hands_over_to_lbfgs_beyond_memory_limit(data_dir):
+    """Without partition of unity the rounds factor one block per column too; beyond
+    memory_limit L-BFGS finishes, and still reproduces libigl's MATLAB active-set oracle."""
+    d = data_dir / "decimated-knight"
+    V, T, _ = skinrs.io.read_mesh(d / "decimated-knight.mesh")
+    C, BE = skinrs.io.read_tgf(d / "decimated-knight.tgf")
+    W_ref = skinrs.io.read_dmat(d / "decimated-knight-matlab-active-set.dmat")
+    kw = {"partition_of_unity": False, "normalize": False, "mass": "barycentric", "tol": 1e-9}
+    _, full = skinrs.bbw_dual(V, T, C, BE=BE, return_info=True, **kw)
+    held = full["factor_bytes"] + full["vector_bytes"]
+    with pytest.warns(RuntimeWarning, match="memory_limit"):
+        W, info = skinrs.bbw_dual(V, T, C, BE=BE, return_info=True, memory_limit=held + 1, **kw)
+    assert info["memory_fallback"] and info["rounds"] == 0 and info["converged"], info
+    assert np.abs(W - W_ref).max() <= 1e-4
+    assert W.min() >= 0 and W.max() <= 1
+
+
 def test_pou_energy_is_below_libigl_normalised_weights():
     """libigl's bbw ignores PoU: its oracle weights, normalised, have a higher energy than ours."""
     f = load("knight")
@@ -323,6 +371,10 @@ def test_bad_options_raise():
         ({"max_iter": 0}, "max_iter"),
         ({"mass": "cotan"}, "voronoi"),
         ({"callback": 3}, "callable"),
+        ({"memory_limit": 0}, "memory_limit"),
+        ({"memory_limit": -1e9}, "memory_limit"),
+        ({"memory_limit": float("nan")}, "memory_limit"),
+        ({"memory_limit": "2GB"}, "memory_limit"),
     ]:
         with pytest.raises(ValueError, match=match):
             skinrs.bbw_dual_constrained(V, T, [0, 24], np.eye(2), **kw)

@@ -43,6 +43,7 @@ def _bbw_dual(
     partition_of_unity: bool,
     seed: int,
     lbfgs_memory: int,
+    memory_limit: int,
     callback: _Callback,
 ) -> tuple[F64, dict[str, Any]]: ...
 

@@ -51,6 +51,7 @@ class BbwOptions(TypedDict, total=False):
     max_iter: int
     seed: int
     lbfgs_memory: int
+    memory_limit: float | None
     verbose: bool
     callback: Callback | None
 
@@ -137,6 +138,26 @@ def biharmonic_energy(W: ArrayLike, B: sp.spmatrix | sp.sparray) -> float:
     return e
 
 
+def _memory_limit_bytes(memory_limit: float | None) -> int:
+    """``memory_limit`` as whole bytes: half of this machine's memory when None."""
+    if memory_limit is None:
+        return _checks.physical_memory() // 2
+    limit = _checks.positive_float(memory_limit, "memory_limit")
+    return min(int(limit), 2**64 - 1)
+
+
+def _bytes_text(n: int) -> str:
+    """``n`` bytes in the largest binary unit it reaches (``"1.50 GiB"``)."""
+    if n < 1024:
+        return f"{n} B"
+    x, unit = n / 1024, "KiB"
+    for bigger in ("MiB", "GiB"):
+        if x < 1024:
+            break
+        x, unit = x / 1024, bigger
+    return f"{x:.2f} {unit}"
+
+
 @overload
 def bbw_dual_constrained(
     V: ArrayLike,
@@ -181,6 +202,7 @@ def bbw_dual_constrained(
     max_iter: int = _DEFAULTS["max_iter"],
     seed: int = _DEFAULTS["seed"],
     lbfgs_memory: int = _DEFAULTS["lbfgs_memory"],
+    memory_limit: float | None = None,
     verbose: bool = False,
     callback: Callback | None = None,
     return_info: bool = False,
@@ -221,6 +243,13 @@ def bbw_dual_constrained(
         Seed of the random start (the paper's), for reproducible results.
     lbfgs_memory : int
         Number of L-BFGS correction pairs (SciPy's default, 10, is the paper's setting).
+    memory_limit : float, optional
+        Bytes the solve may take for its factors and dense vectors (default: half of this
+        machine's memory). Each factor's size is known from its symbolic analysis before it is
+        allocated. If the Cholesky factor of ``B_ff`` would not fit, ``MemoryError`` is raised
+        before it is computed. If the active set's support factors would not fit (it holds one
+        per column), L-BFGS on the dual, which needs only the factor of ``B_ff``, finishes the
+        solve to the same certified ``tol`` (slower), with a ``RuntimeWarning``.
     verbose : bool
         Print progress (gap per iteration, throttled) and a summary to stderr.
     callback : callable, optional
@@ -234,7 +263,10 @@ def bbw_dual_constrained(
         them, and hand-overs to L-BFGS when the rounds stall), energy, lower_bound, gap,
         relative_gap, dual_objective, min_raw_weight, max_raw_weight, converged, seconds (the
         whole call) and seconds per phase: time_operators, time_factor, time_solve and within it
-        time_lbfgs, time_active_set (of which time_support_factor and time_cg).
+        time_lbfgs, time_active_set (of which time_support_factor and time_cg); factor_bytes,
+        vector_bytes and support_factor_bytes (the factor of ``B_ff``, the dense vectors, and
+        the most the support factors of one round took or would have taken), and
+        memory_fallback (those did not fit ``memory_limit``).
 
     Returns
     -------
@@ -283,6 +315,7 @@ def bbw_dual_constrained(
     max_iter = _checks.positive_int(max_iter, "max_iter", hi=2**63 - 1)
     lbfgs_memory = _checks.positive_int(lbfgs_memory, "lbfgs_memory", hi=10_000)
     seed = _checks.integer(seed, "seed", 0, 2**64 - 1)
+    limit = _memory_limit_bytes(memory_limit)
     _checks.as_callback(callback)
 
     t0 = time.perf_counter()
@@ -305,9 +338,20 @@ def bbw_dual_constrained(
         partition_of_unity=bool(partition_of_unity),
         seed=int(seed),
         lbfgs_memory=int(lbfgs_memory),
+        memory_limit=limit,
         callback=cb,
     )
     info = Info(raw, time_operators=t_ops)
+    if info["memory_fallback"]:
+        warnings.warn(
+            f"bbw_dual: the active set's support factors need "
+            f"{_bytes_text(info['support_factor_bytes'])}, more than memory_limit = "
+            f"{_bytes_text(limit)} leaves besides B_ff's factor "
+            f"({_bytes_text(info['factor_bytes'])}) and the vectors "
+            f"({_bytes_text(info['vector_bytes'])}); L-BFGS on the dual solved the rest",
+            RuntimeWarning,
+            stacklevel=2,
+        )
     if not info["converged"]:
         warnings.warn(
             f"bbw_dual stopped after {info['iterations']} iterations with relative duality gap "
@@ -384,6 +428,7 @@ def bbw_dual(
     max_iter: int = _DEFAULTS["max_iter"],
     seed: int = _DEFAULTS["seed"],
     lbfgs_memory: int = _DEFAULTS["lbfgs_memory"],
+    memory_limit: float | None = None,
     verbose: bool = False,
     callback: Callback | None = None,
     return_info: bool = False,
@@ -421,6 +466,7 @@ def bbw_dual(
         max_iter=max_iter,
         seed=seed,
         lbfgs_memory=lbfgs_memory,
+        memory_limit=memory_limit,
         verbose=verbose,
         callback=callback,
         return_info=return_info,

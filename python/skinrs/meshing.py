@@ -414,6 +414,7 @@ def skin_weights(
     max_iter: int = _BBW_DEFAULTS["max_iter"],
     seed: int = _BBW_DEFAULTS["seed"],
     lbfgs_memory: int = _BBW_DEFAULTS["lbfgs_memory"],
+    memory_limit: float | None = None,
     verbose: bool = False,
     callback: Callback | None = None,
     return_mesh: bool = False,
@@ -430,8 +431,8 @@ def skin_weights(
         As in :func:`mesh_with_skeleton`.
     mesh_options : dict, optional
         Extra keyword arguments of :func:`mesh_with_skeleton`.
-    partition_of_unity, normalize, mass, solver, tol, max_iter, seed, lbfgs_memory, verbose
-        and callback as in :func:`skinrs.bbw_dual_constrained`.
+    partition_of_unity, normalize, mass, solver, tol, max_iter, seed, lbfgs_memory, memory_limit,
+        verbose and callback as in :func:`skinrs.bbw_dual_constrained`.
     return_mesh : bool
         Also return a dict with the volume mesh and its weights: ``V``, ``T``, ``b``, ``bc``,
         ``W`` (all volume vertices).
@@ -476,6 +477,7 @@ def skin_weights(
         max_iter=max_iter,
         seed=seed,
         lbfgs_memory=lbfgs_memory,
+        memory_limit=memory_limit,
         verbose=verbose,
         callback=callback,
         return_info=True,

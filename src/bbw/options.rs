@@ -44,6 +44,10 @@ pub struct BbwOptions {
     pub seed: u64,
     /// L-BFGS memory.
     pub memory: usize,
+    /// Bytes the solve's large allocations may take: the factor of `B_ff`, the dense vectors
+    /// ([`BbwOptions::vector_bytes`]) and the active set's support factors. `usize::MAX`: no
+    /// limit.
+    pub memory_limit: usize,
 }
 
 impl Default for BbwOptions {
@@ -55,6 +59,7 @@ impl Default for BbwOptions {
             partition_of_unity: true,
             seed: 0,
             memory: 10,
+            memory_limit: usize::MAX,
         }
     }
 }
@@ -97,6 +102,14 @@ pub struct BbwInfo {
     /// Within the active-set phase: factoring the per-column support blocks, and CG on `mu`.
     pub time_support_factor: f64,
     pub time_cg: f64,
+    /// Bytes of the factor of `B_ff`, of the dense vectors ([`BbwOptions::vector_bytes`]), and
+    /// the most the support factors of one active-set round took (or would have taken, when
+    /// they did not fit `memory_limit`).
+    pub factor_bytes: usize,
+    pub vector_bytes: usize,
+    pub support_factor_bytes: usize,
+    /// The support factors did not fit `memory_limit`, and L-BFGS on the dual finished the solve.
+    pub memory_fallback: bool,
 }
 
 impl BbwOptions {
@@ -108,5 +121,13 @@ impl BbwOptions {
         } else {
             2
         }
+    }
+
+    /// Bytes of the dense vectors a solve with `nf` free rows and `m` columns holds besides the
+    /// factors: L-BFGS's `memory` correction pairs and about a dozen working copies, each of
+    /// the size of the dual variables.
+    pub(crate) fn vector_bytes(&self, nf: usize, m: usize) -> usize {
+        let entries = nf.saturating_mul(m).saturating_mul(self.dual_blocks());
+        entries.saturating_mul(8 * (2 * self.memory + 12))
     }
 }

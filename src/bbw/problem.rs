@@ -7,9 +7,10 @@ use ndarray::ArrayView2;
 use rayon::prelude::*;
 
 use super::energy::LaplacianEnergy;
+use super::options::BbwOptions;
 use crate::error::{SkinError, SkinResult};
 use crate::invalid;
-use crate::sparse::{from_triplets, Csc, TreeLlt};
+use crate::sparse::{from_triplets, Csc, LltPlan, TreeLlt};
 
 /// The BBW quadratic restricted to the free vertices.
 ///
@@ -35,6 +36,8 @@ pub struct EliminatedProblem {
     /// Unconstrained biharmonic weights `W0 = -A^{-1} G` (`= R` of eq. 14, since `W0 1 = 1`).
     pub w0: Vec<f64>,
     llt: TreeLlt,
+    /// Bytes of `llt`'s values (and row indices).
+    pub factor_bytes: usize,
     /// The factors of `B` when known: the energy is then evaluated from them (see [`energy`]).
     ///
     /// [`energy`]: super::energy
@@ -50,6 +53,18 @@ impl EliminatedProblem {
     /// connected component of `bmat`'s graph with no constrained vertex (which makes `B_ff`
     /// singular), or a failed factorisation.
     pub fn new(bmat: &Csc, b: &[usize], bc: ArrayView2<f64>) -> SkinResult<Self> {
+        Self::within(bmat, b, bc, &BbwOptions::default())
+    }
+
+    /// [`EliminatedProblem::new`] for a solve with `opts`: errors with
+    /// [`SkinError::OutOfMemory`] before factoring `B_ff` when its factor and the solve's
+    /// vectors would exceed `opts.memory_limit`.
+    pub fn within(
+        bmat: &Csc,
+        b: &[usize],
+        bc: ArrayView2<f64>,
+        opts: &BbwOptions,
+    ) -> SkinResult<Self> {
         let t0 = Instant::now();
         let n = bmat.nrows();
         let m = bc.ncols();
@@ -107,12 +122,25 @@ impl EliminatedProblem {
             }
         }
         let a = from_triplets(nf, nf, &trip)?;
-        let llt = TreeLlt::new(&a).map_err(|e| {
+        let not_spd = |e: String| {
             SkinError::Numerical(format!(
                 "B_ff is not positive definite ({e}); check for degenerate elements or a \
                  component without constrained vertices"
             ))
-        })?;
+        };
+        let plan = LltPlan::new(&a).map_err(not_spd)?;
+        let factor_bytes = plan.factor_bytes();
+        let vectors = opts.vector_bytes(nf, m);
+        if factor_bytes.saturating_add(vectors) > opts.memory_limit {
+            return Err(SkinError::OutOfMemory(format!(
+                "memory_limit: the Cholesky factor of B_ff ({nf} free vertices) needs {} and the \
+                 solver's vectors ({m} columns) {}, more than memory_limit = {}",
+                bytes_text(factor_bytes),
+                bytes_text(vectors),
+                bytes_text(opts.memory_limit)
+            )));
+        }
+        let llt = TreeLlt::from_plan(plan, &a).map_err(not_spd)?;
 
         let mut w0: Vec<f64> = g.iter().map(|x| -x).collect();
         let mut prob = EliminatedProblem {
@@ -126,6 +154,7 @@ impl EliminatedProblem {
             c0,
             w0: Vec::new(),
             llt,
+            factor_bytes,
             laplacian: None,
             time_factor: 0.0,
         };
@@ -279,4 +308,20 @@ fn check_components(bmat: &Csc, is_b: &[usize]) -> SkinResult<()> {
         }
     }
     Ok(())
+}
+
+/// `bytes` for a message, in the largest binary unit it reaches (`"1.50 GiB"`, `"312 B"`).
+fn bytes_text(bytes: usize) -> String {
+    let units = ["B", "KiB", "MiB", "GiB", "TiB"];
+    let mut x = bytes as f64;
+    let mut unit = 0;
+    while x >= 1024.0 && unit + 1 < units.len() {
+        x /= 1024.0;
+        unit += 1;
+    }
+    if unit == 0 {
+        format!("{bytes} B")
+    } else {
+        format!("{x:.2} {}", units[unit])
+    }
 }

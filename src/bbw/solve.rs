@@ -29,6 +29,8 @@ pub fn bbw_dual(
     let mut info = BbwInfo {
         solver: opts.solver.name().to_string(),
         time_factor: prob.time_factor,
+        factor_bytes: prob.factor_bytes,
+        vector_bytes: opts.vector_bytes(prob.nf(), prob.m),
         ..Default::default()
     };
     if prob.nf() == 0 {

@@ -29,7 +29,7 @@ fn project(opts: &BbwOptions, w: &[f64], nf: usize, m: usize) -> Vec<f64> {
 
 /// The paper's solver: L-BFGS on the dual in `U` with `Y = U o U`, from `start`, until the
 /// duality gap of the best projected iterate is at most `tol` (relative) or `opts.max_iter`.
-/// Adds its iterations and evaluations to `info`.
+/// Adds its iterations and evaluations to `info`; returns the last iterate `U`.
 pub(crate) fn run_lbfgs(
     prob: &EliminatedProblem,
     opts: &BbwOptions,
@@ -38,7 +38,7 @@ pub(crate) fn run_lbfgs(
     best: &mut CertifiedBounds,
     info: &mut BbwInfo,
     progress: &mut dyn Progress,
-) -> SkinResult<()> {
+) -> SkinResult<Vec<f64>> {
     let (nf, m) = (prob.nf(), prob.m);
     let eval = |y: &[f64]| -> DualPoint {
         if opts.partition_of_unity {
@@ -101,7 +101,7 @@ pub(crate) fn run_lbfgs(
     }
     info.iterations += iterations;
     info.evaluations += evaluations;
-    Ok(())
+    Ok(u)
 }
 
 /// The paper's start (Sec. 8): uniform random `U`, scaled so each column of `U o U` sums to 1.

@@ -85,7 +85,7 @@ pub(crate) fn csc_from_parts(
 #[pyfunction]
 #[pyo3(name = "_bbw_dual", signature = (l_data, l_indices, l_indptr, masses, b, bc, *, solver, tol,
                                         max_iter, partition_of_unity, seed, lbfgs_memory,
-                                        callback))]
+                                        memory_limit, callback))]
 #[allow(clippy::too_many_arguments)]
 fn py_bbw_dual<'py>(
     py: Python<'py>,
@@ -101,6 +101,7 @@ fn py_bbw_dual<'py>(
     partition_of_unity: bool,
     seed: u64,
     lbfgs_memory: usize,
+    memory_limit: u64,
     callback: Option<Py<PyAny>>,
 ) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, PyDict>)> {
     let masses = masses.as_slice()?.to_vec();
@@ -133,11 +134,12 @@ fn py_bbw_dual<'py>(
         partition_of_unity,
         seed,
         memory: lbfgs_memory.max(1),
+        memory_limit: usize::try_from(memory_limit).unwrap_or(usize::MAX),
     };
     let mut progress = PyProgress::new(callback);
     let (w, info): (Array2<f64>, _) = released(py, || {
         let bmat = biharmonic_from_parts(&l, &masses)?;
-        let prob = EliminatedProblem::new(&bmat, &b_idx, bc.view())?
+        let prob = EliminatedProblem::within(&bmat, &b_idx, bc.view(), &opts)?
             .with_laplacian(LaplacianEnergy::new(l, &masses)?)?;
         bbw_dual(&prob, &opts, &mut progress)
     })?;
@@ -162,6 +164,10 @@ fn py_bbw_dual<'py>(
     d.set_item("time_support_factor", info.time_support_factor)?;
     d.set_item("fallbacks", info.fallbacks)?;
     d.set_item("time_cg", info.time_cg)?;
+    d.set_item("factor_bytes", info.factor_bytes)?;
+    d.set_item("vector_bytes", info.vector_bytes)?;
+    d.set_item("support_factor_bytes", info.support_factor_bytes)?;
+    d.set_item("memory_fallback", info.memory_fallback)?;
     Ok((w.into_pyarray(py), d))
 }
 

@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 use ndarray::Array2;
 use numpy::{IntoPyArray, PyArray1, PyReadonlyArray2};
 use pyo3::create_exception;
-use pyo3::exceptions::{PyKeyboardInterrupt, PyRuntimeError, PyValueError};
+use pyo3::exceptions::{PyKeyboardInterrupt, PyMemoryError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyTuple;
 
@@ -76,6 +76,7 @@ pub(crate) fn to_pyerr(e: SkinError) -> PyErr {
             .with(|c| c.borrow_mut().take())
             .unwrap_or_else(|| PyKeyboardInterrupt::new_err("skinrs computation interrupted")),
         SkinError::Numerical(s) => PyRuntimeError::new_err(s),
+        SkinError::OutOfMemory(s) => PyMemoryError::new_err(s),
     }
 }
 

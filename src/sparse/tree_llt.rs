@@ -13,25 +13,22 @@
 //! part works on its own copy of the block (`n k` doubles per thread of extra memory).
 //! `docs/solver.md` has the measurement.
 
-use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::matmul::matmul;
 use faer::linalg::triangular_solve::{
     solve_lower_triangular_in_place, solve_upper_triangular_in_place,
 };
-use faer::sparse::linalg::cholesky::{
-    factorize_symbolic_cholesky, CholeskySymbolicParams, LltRef, SymbolicCholesky,
-    SymbolicCholeskyRaw, SymmetricOrdering,
-};
+use faer::sparse::linalg::cholesky::SymbolicCholeskyRaw;
+#[cfg(test)]
 use faer::sparse::linalg::SupernodalThreshold;
-use faer::{Accum, Conj, MatMut, Par, Side};
+use faer::{Accum, MatMut, Par};
 use rayon::prelude::*;
 
+use super::llt_plan::{LltPlan, SparseLlt};
 use super::Csc;
 
 /// Cholesky factor with a partition of its supernodal elimination tree over the rayon threads.
 pub struct TreeLlt {
-    symbolic: SymbolicCholesky<usize>,
-    values: Vec<f64>,
+    llt: SparseLlt,
     /// Supernodes of each thread's subtrees (ascending: children before parents), and the
     /// common ancestors solved on one thread (ascending; all supernodes when one thread runs).
     /// Both empty for a simplicial factor (small matrices), which faer's own solve handles.
@@ -40,58 +37,36 @@ pub struct TreeLlt {
 }
 
 impl TreeLlt {
-    /// Factors the SPD `a` (lower triangle read), or says why it failed.
-    pub fn new(a: &Csc) -> Result<Self, String> {
-        Self::with_params(a, SupernodalThreshold::AUTO, rayon::current_num_threads())
+    /// Factors the SPD `a` (lower triangle read) by its symbolic analysis `plan` (which says the
+    /// factor's size beforehand), or says why it failed.
+    pub fn from_plan(plan: LltPlan, a: &Csc) -> Result<Self, String> {
+        Self::split(plan.factor(a)?, rayon::current_num_threads())
     }
 
     /// `new` with faer's choice between simplicial and supernodal made by `threshold` and the
     /// tree split over `threads` parts (tests force small factors to be supernodal).
+    #[cfg(test)]
     fn with_params(
         a: &Csc,
         threshold: SupernodalThreshold,
         threads: usize,
     ) -> Result<Self, String> {
-        let params = CholeskySymbolicParams {
-            supernodal_flop_ratio_threshold: threshold,
-            ..Default::default()
-        };
-        let symbolic =
-            factorize_symbolic_cholesky(a.symbolic(), Side::Lower, SymmetricOrdering::Amd, params)
-                .map_err(|e| format!("symbolic analysis: {e:?}"))?;
-        let mut values = vec![0.0; symbolic.len_val()];
-        let par = Par::Seq;
-        let mut mem = MemBuffer::try_new(
-            symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default()),
-        )
-        .map_err(|e| format!("{e:?}"))?;
-        symbolic
-            .factorize_numeric_llt(
-                &mut values,
-                a.as_ref(),
-                Side::Lower,
-                Default::default(),
-                par,
-                MemStack::new(&mut mem),
-                Default::default(),
-            )
-            .map_err(|e| format!("{e:?}"))?;
-        let (parts, top) = match symbolic.raw() {
+        Self::split(LltPlan::with_threshold(a, threshold)?.factor(a)?, threads)
+    }
+
+    /// The factor `llt` with its supernodal tree split over `threads` parts.
+    fn split(llt: SparseLlt, threads: usize) -> Result<Self, String> {
+        let (parts, top) = match llt.symbolic.raw() {
             SymbolicCholeskyRaw::Supernodal(sn) if threads > 1 => split_tree(sn, threads),
             SymbolicCholeskyRaw::Supernodal(sn) => (Vec::new(), (0..sn.n_supernodes()).collect()),
             SymbolicCholeskyRaw::Simplicial(_) => (Vec::new(), Vec::new()),
         };
-        Ok(TreeLlt {
-            symbolic,
-            values,
-            parts,
-            top,
-        })
+        Ok(TreeLlt { llt, parts, top })
     }
 
     /// Number of rows (and columns) of the factored matrix.
     pub fn nrows(&self) -> usize {
-        self.symbolic.nrows()
+        self.llt.symbolic.nrows()
     }
 
     /// Overwrites the `n x k` column-major `x` with `A^{-1} x`.
@@ -101,12 +76,12 @@ impl TreeLlt {
             return;
         }
         let k = x.len() / n;
-        let SymbolicCholeskyRaw::Supernodal(sn) = self.symbolic.raw() else {
-            return self.faer_solve(x, k);
+        let SymbolicCholeskyRaw::Supernodal(sn) = self.llt.symbolic.raw() else {
+            return self.llt.solve_in_place(x);
         };
         // The factor is of `P A P^T`: permute in (to row-major), solve, permute out.
         let identity: Vec<usize>;
-        let fwd: &[usize] = match self.symbolic.perm() {
+        let fwd: &[usize] = match self.llt.symbolic.perm() {
             Some(p) => p.arrays().0,
             None => {
                 identity = (0..n).collect();
@@ -121,7 +96,7 @@ impl TreeLlt {
         });
         let ln = Supernodes {
             sn,
-            values: &self.values,
+            values: &self.llt.values,
         };
         self.forward(&ln, &mut y, k);
         self.backward(&ln, &mut y, k);
@@ -205,18 +180,6 @@ impl TreeLlt {
                 y[c0 * k..c1 * k].copy_from_slice(&z[c0 * k..c1 * k]);
             }
         }
-    }
-
-    fn faer_solve(&self, x: &mut [f64], k: usize) {
-        let n = self.nrows();
-        let par = Par::Seq;
-        let mut mem = MemBuffer::new(self.symbolic.solve_in_place_scratch::<f64>(k, par));
-        LltRef::new(&self.symbolic, &self.values).solve_in_place_with_conj(
-            Conj::No,
-            MatMut::from_column_major_slice_mut(x, n, k),
-            par,
-            MemStack::new(&mut mem),
-        );
     }
 }
 
@@ -384,6 +347,7 @@ mod tests {
     use faer::linalg::solvers::Solve;
     use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
     use faer::sparse::Triplet;
+    use faer::Side;
 
     /// 2D grid Laplacian plus identity: SPD, supernodal at this size.
     fn grid(k: usize) -> Csc {
@@ -443,7 +407,7 @@ mod tests {
     #[test]
     fn parts_are_closed_subtrees_of_similar_work() {
         let f = TreeLlt::with_params(&grid(60), SupernodalThreshold::FORCE_SUPERNODAL, 1).unwrap();
-        let SymbolicCholeskyRaw::Supernodal(sn) = f.symbolic.raw() else {
+        let SymbolicCholeskyRaw::Supernodal(sn) = f.llt.symbolic.raw() else {
             panic!("expected a supernodal factor");
         };
         let ns = sn.n_supernodes();

@@ -1,12 +1,10 @@
 //! Rounds of the box-constrained active-set method (no partition of unity, App. A).
 
-use std::time::Instant;
-
 use rayon::prelude::*;
 
 use super::spread::spread_negative;
 use super::stall::{Outcome, StallWatch, MAX_ROUNDS, STALL_ROUNDS};
-use super::support_factor::factor_supports;
+use super::support_factor::factor_within_limit;
 use crate::bbw::bounds::CertifiedBounds;
 use crate::bbw::dual::{box_eval, project_box};
 use crate::bbw::options::{BbwInfo, BbwOptions};
@@ -39,12 +37,14 @@ pub(super) fn box_rounds(
         })
         .collect();
     let mut watch = StallWatch::new(best.relative_gap());
+    // The last round's dual point `(Y, U)`, for L-BFGS when the next round's factors do not fit.
+    let mut last_dual: Option<Vec<f64>> = None;
     for round in 0..opts.max_iter.min(MAX_ROUNDS) {
-        info.rounds += 1;
         let free: Vec<bool> = state.iter().map(|&s| s == 0).collect();
-        let t = Instant::now();
-        let factors = factor_supports(&prob.a, &free, nf)?;
-        info.time_support_factor += t.elapsed().as_secs_f64();
+        let Some(factors) = factor_within_limit(prob, opts, &free, info)? else {
+            return Ok(Outcome::OverBudget(last_dual));
+        };
+        info.rounds += 1;
         // w_j: 1 on the upper set, A_FF^{-1}(-g - A_FU 1) on the free set, 0 elsewhere.
         let upper_ind: Vec<f64> = state.iter().map(|&s| f64::from(s == 2)).collect();
         let a_upper = prob.apply_a(&upper_ind);
@@ -116,6 +116,8 @@ pub(super) fn box_rounds(
             y.extend_from_slice(&u);
             return Ok(Outcome::Stalled(y));
         }
+        y.extend_from_slice(&u);
+        last_dual = Some(y);
     }
     Ok(Outcome::Done)
 }

@@ -84,7 +84,7 @@ fn solve_with_stall(
     let t = Instant::now();
     let start = random_start(nf, m, opts.dual_blocks(), opts.seed);
     let warm = WARM_GAP.max(opts.tol);
-    run_lbfgs(prob, opts, warm, start, best, info, progress)?;
+    let u_warm = run_lbfgs(prob, opts, warm, start, best, info, progress)?;
     info.time_lbfgs = t.elapsed().as_secs_f64();
     if best.relative_gap() <= opts.tol {
         return Ok(());
@@ -95,10 +95,7 @@ fn solve_with_stall(
     if !opts.partition_of_unity {
         let outcome = box_rounds(prob, opts, &w, best, info, progress)?;
         info.time_active_set = t.elapsed().as_secs_f64();
-        if let Outcome::Stalled(y) = outcome {
-            fallback_lbfgs(prob, opts, opts.max_iter, &y, best, info, progress)?;
-        }
-        return Ok(());
+        return hand_over(prob, opts, outcome, u_warm, best, info, progress);
     }
     let mut state = RoundsState::from_warm_start(&w, WARM_GAP, nf, m);
     let watch = Watch::Gap(stall_rounds);
@@ -115,11 +112,39 @@ fn solve_with_stall(
         let t = Instant::now();
         outcome = pou_rounds(prob, opts, &mut state, Watch::Bounds, best, info, progress)?;
         info.time_active_set += t.elapsed().as_secs_f64();
-        if let Outcome::Stalled(y) = outcome {
-            fallback_lbfgs(prob, opts, opts.max_iter, &y, best, info, progress)?;
+    }
+    hand_over(prob, opts, outcome, u_warm, best, info, progress)
+}
+
+/// What follows the last run of rounds: L-BFGS on the dual until `tol` or `max_iter` when the
+/// rounds stalled, or when their next support factors would not fit `memory_limit` (L-BFGS
+/// needs only the factor of `A`). It starts from the last round's multipliers, or, when no
+/// round ran, goes on from the warm start's iterate `u_warm`.
+fn hand_over(
+    prob: &EliminatedProblem,
+    opts: &BbwOptions,
+    outcome: Outcome,
+    u_warm: Vec<f64>,
+    best: &mut CertifiedBounds,
+    info: &mut BbwInfo,
+    progress: &mut dyn Progress,
+) -> SkinResult<()> {
+    match outcome {
+        Outcome::Done => Ok(()),
+        Outcome::Stalled(y) => fallback_lbfgs(prob, opts, opts.max_iter, &y, best, info, progress),
+        Outcome::OverBudget(Some(y)) => {
+            info.memory_fallback = true;
+            fallback_lbfgs(prob, opts, opts.max_iter, &y, best, info, progress)
+        }
+        Outcome::OverBudget(None) => {
+            info.memory_fallback = true;
+            info.fallbacks += 1;
+            let t = Instant::now();
+            run_lbfgs(prob, opts, opts.tol, u_warm, best, info, progress)?;
+            info.time_lbfgs += t.elapsed().as_secs_f64();
+            Ok(())
         }
     }
-    Ok(())
 }
 
 /// L-BFGS on the dual (at most `max_iter` iterations) warm-started from multipliers `y`.

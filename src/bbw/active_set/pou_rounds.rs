@@ -12,7 +12,7 @@ use super::next_support::{next_support, SignThresholds};
 use super::pcg::{pcg, row_sums_minus_one};
 use super::spread::spread_negative;
 use super::stall::{Outcome, OwnBounds, StallWatch, Watch, MAX_ROUNDS};
-use super::support_factor::{factor_supports, longest_first};
+use super::support_factor::{factor_within_limit, longest_first};
 use crate::bbw::bounds::CertifiedBounds;
 use crate::bbw::dual::{pou_eval, project_pou};
 use crate::bbw::options::{BbwInfo, BbwOptions};
@@ -106,18 +106,20 @@ pub(super) fn pou_rounds(
     let budget = opts.max_iter.min(MAX_ROUNDS).saturating_sub(info.rounds);
     // After a dilated round: the support and `mu` the round would have gone on with undilated.
     let mut undilated: Option<(Vec<bool>, Vec<f64>)> = None;
+    // The last round's dual point, for L-BFGS when the next round's factors do not fit.
+    let mut last_dual: Option<Vec<f64>> = None;
     for _ in 0..budget {
-        let round = info.rounds;
-        info.rounds += 1;
         let RoundsState {
             support,
             mu,
             cg_tol,
             dilation,
         } = &mut *state;
-        let t = Instant::now();
-        let factors = factor_supports(&prob.a, support, nf)?;
-        info.time_support_factor += t.elapsed().as_secs_f64();
+        let Some(factors) = factor_within_limit(prob, opts, support, info)? else {
+            return Ok(Outcome::OverBudget(last_dual));
+        };
+        let round = info.rounds;
+        info.rounds += 1;
         let sizes: Vec<usize> = factors.iter().map(|f| f.idx.len()).collect();
         let weights = |mu: &[f64]| -> Vec<f64> {
             let cols = longest_first(&sizes, |j| {
@@ -240,6 +242,7 @@ pub(super) fn pou_rounds(
         if stalled {
             return Ok(Outcome::Stalled(y_plus));
         }
+        last_dual = Some(y_plus);
         // Rows are renormalised at the end, so a PoU residual far below tol changes nothing;
         // while signs still flip, one of a tenth of the gap, down to CG_TOL_SIGNS * tol,
         // decides them as well.

@@ -10,6 +10,9 @@ pub(super) enum Outcome {
     /// The gap stopped shrinking; carries the last dual variables (`Y`, or `(Y, U)` stacked)
     /// for the fallback.
     Stalled(Vec<f64>),
+    /// The next round's support factors would exceed the memory limit; carries the last
+    /// round's dual variables (as `Stalled`), `None` before the first round.
+    OverBudget(Option<Vec<f64>>),
 }
 
 /// Tracks whether the certified gap still shrinks.

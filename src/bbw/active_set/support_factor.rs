@@ -1,87 +1,168 @@
-//! Sparse Cholesky factors of `A` restricted to each column's support, computed in parallel.
+//! Sparse Cholesky factors of `A` restricted to each column's support, computed in parallel
+//! once their symbolic analyses say that they fit the memory budget.
 
-use faer::linalg::solvers::Solve;
-use faer::sparse::linalg::solvers::Llt;
+use std::sync::Mutex;
+use std::time::Instant;
+
 use faer::sparse::SymbolicSparseColMat;
-use faer::MatMut;
 use rayon::prelude::*;
 
+use crate::bbw::options::{BbwInfo, BbwOptions};
+use crate::bbw::problem::EliminatedProblem;
 use crate::error::{SkinError, SkinResult};
-use crate::sparse::{cholesky, Csc};
+use crate::sparse::{Csc, LltPlan, SparseLlt};
 
 /// Cholesky factor of `A` restricted to one column's support `idx` (sorted free-row indices).
 pub(super) struct SupportFactor {
     pub idx: Vec<usize>,
-    llt: Option<Llt<usize, f64>>,
+    llt: Option<SparseLlt>,
 }
 
 impl SupportFactor {
-    fn new(a: &Csc, idx: Vec<usize>) -> SkinResult<Self> {
-        if idx.is_empty() {
-            return Ok(SupportFactor { idx, llt: None });
-        }
-        let mut pos = vec![usize::MAX; a.nrows()];
-        for (k, &i) in idx.iter().enumerate() {
-            pos[i] = k;
-        }
-        // Only the lower triangle is read by the factorisation. `A`'s rows are sorted and `pos`
-        // is increasing on `idx`, so the submatrix is built column by column in CSC order,
-        // without the sort that assembling from triplets costs.
-        let k = idx.len();
-        let (mut col_ptr, mut row_idx, mut val) = (Vec::with_capacity(k + 1), vec![], vec![]);
-        col_ptr.push(0);
-        for &j in &idx {
-            let rows = a.symbolic().row_idx_of_col_raw(j);
-            for (&i, &v) in rows.iter().zip(a.val_of_col(j)) {
-                if i >= j && pos[i] != usize::MAX {
-                    row_idx.push(pos[i]);
-                    val.push(v);
-                }
-            }
-            col_ptr.push(row_idx.len());
-        }
-        let sub = Csc::new(
-            SymbolicSparseColMat::new_checked(k, k, col_ptr, None, row_idx),
-            val,
-        );
-        // A principal submatrix of the SPD `A` is SPD, so this fails only on round-off.
-        let llt = cholesky(&sub)
-            .map_err(|e| SkinError::Numerical(format!("Cholesky of a support block: {e}")))?;
-        Ok(SupportFactor {
-            idx,
-            llt: Some(llt),
-        })
-    }
-
     /// `A_FF^{-1} x[F]`, as a vector over `F`.
     pub fn solve_gathered(&self, x: &[f64]) -> Vec<f64> {
         let mut r: Vec<f64> = self.idx.iter().map(|&i| x[i]).collect();
         if let Some(llt) = &self.llt {
-            let k = r.len();
-            llt.solve_in_place(MatMut::from_column_major_slice_mut(&mut r, k, 1));
+            llt.solve_in_place(&mut r);
         }
         r
     }
 }
 
-/// Factors `A` on every column's support (`support[j * nf + i]`), in parallel over columns,
-/// largest support first.
-pub(super) fn factor_supports(
-    a: &Csc,
+/// One column's support block `A_FF` (its lower triangle) with the symbolic analysis of its
+/// factor, which says the factor's size before it is allocated.
+struct SupportPlan {
+    idx: Vec<usize>,
+    block: Option<(Csc, LltPlan)>,
+}
+
+impl SupportPlan {
+    fn new(a: &Csc, idx: Vec<usize>) -> SkinResult<Self> {
+        if idx.is_empty() {
+            return Ok(SupportPlan { idx, block: None });
+        }
+        let sub = lower_block(a, &idx);
+        let plan = LltPlan::new(&sub).map_err(failed)?;
+        Ok(SupportPlan {
+            idx,
+            block: Some((sub, plan)),
+        })
+    }
+
+    fn factor_bytes(&self) -> usize {
+        self.block.as_ref().map_or(0, |(_, p)| p.factor_bytes())
+    }
+
+    fn factor(self) -> SkinResult<SupportFactor> {
+        let llt = match self.block {
+            Some((sub, plan)) => Some(plan.factor(&sub).map_err(failed)?),
+            None => None,
+        };
+        Ok(SupportFactor { idx: self.idx, llt })
+    }
+}
+
+/// A principal submatrix of the SPD `A` is SPD, so its factorisation fails only on round-off.
+fn failed(e: String) -> SkinError {
+    SkinError::Numerical(format!("Cholesky of a support block: {e}"))
+}
+
+/// The lower triangle of `A` on the rows and columns `idx` (sorted). `A`'s rows are sorted and
+/// the new indices increase along `idx`, so the block is built column by column in CSC order,
+/// without the sort that assembling from triplets costs.
+fn lower_block(a: &Csc, idx: &[usize]) -> Csc {
+    let mut pos = vec![usize::MAX; a.nrows()];
+    for (k, &i) in idx.iter().enumerate() {
+        pos[i] = k;
+    }
+    let k = idx.len();
+    let (mut col_ptr, mut row_idx, mut val) = (Vec::with_capacity(k + 1), vec![], vec![]);
+    col_ptr.push(0);
+    for &j in idx {
+        let rows = a.symbolic().row_idx_of_col_raw(j);
+        for (&i, &v) in rows.iter().zip(a.val_of_col(j)) {
+            if i >= j && pos[i] != usize::MAX {
+                row_idx.push(pos[i]);
+                val.push(v);
+            }
+        }
+        col_ptr.push(row_idx.len());
+    }
+    Csc::new(
+        SymbolicSparseColMat::new_checked(k, k, col_ptr, None, row_idx),
+        val,
+    )
+}
+
+/// [`factor_supports`] within what `opts.memory_limit` leaves besides `A`'s factor and the
+/// solve's vectors, timed and with the factors' bytes recorded in `info`; `None` when they do
+/// not fit.
+pub(super) fn factor_within_limit(
+    prob: &EliminatedProblem,
+    opts: &BbwOptions,
     support: &[bool],
-    nf: usize,
-) -> SkinResult<Vec<SupportFactor>> {
+    info: &mut BbwInfo,
+) -> SkinResult<Option<Vec<SupportFactor>>> {
+    let t = Instant::now();
+    let held = prob
+        .factor_bytes
+        .saturating_add(opts.vector_bytes(prob.nf(), prob.m));
+    let budget = opts.memory_limit.saturating_sub(held);
+    let outcome = factor_supports(&prob.a, support, prob.nf(), budget)?;
+    info.time_support_factor += t.elapsed().as_secs_f64();
+    Ok(match outcome {
+        Supports::Factored { factors, bytes } => {
+            info.support_factor_bytes = info.support_factor_bytes.max(bytes);
+            Some(factors)
+        }
+        Supports::OverBudget { bytes } => {
+            info.support_factor_bytes = info.support_factor_bytes.max(bytes);
+            None
+        }
+    })
+}
+
+/// The support factors of one round, or the bytes they would take beyond the budget.
+enum Supports {
+    Factored {
+        factors: Vec<SupportFactor>,
+        bytes: usize,
+    },
+    OverBudget {
+        bytes: usize,
+    },
+}
+
+/// Factors `A` on every column's support (`support[j * nf + i]`), in parallel over columns,
+/// largest support first, unless the factors would take more than `budget` bytes: the solve
+/// holds them all at once (CG on `mu` needs every column's solve in each iteration), so that
+/// is decided from the symbolic analyses before any factor is allocated.
+fn factor_supports(a: &Csc, support: &[bool], nf: usize, budget: usize) -> SkinResult<Supports> {
     let columns: Vec<&[bool]> = support.chunks(nf).collect();
     let sizes: Vec<usize> = columns
         .par_iter()
         .map(|col| col.iter().filter(|&&s| s).count())
         .collect();
-    longest_first(&sizes, |j| {
+    let plans = longest_first(&sizes, |j| {
         let idx = (0..nf).filter(|&i| columns[j][i]).collect();
-        SupportFactor::new(a, idx)
+        SupportPlan::new(a, idx).map(|p| Mutex::new(Some(p)))
     })
     .into_iter()
-    .collect()
+    .collect::<SkinResult<Vec<_>>>()?;
+    let bytes = plans
+        .iter()
+        .filter_map(|p| p.lock().ok()?.as_ref().map(SupportPlan::factor_bytes))
+        .fold(0usize, usize::saturating_add);
+    if bytes > budget {
+        return Ok(Supports::OverBudget { bytes });
+    }
+    let factors = longest_first(&sizes, |j| {
+        let plan = plans[j].lock().ok().and_then(|mut p| p.take());
+        plan.expect("each plan is factored once").factor()
+    })
+    .into_iter()
+    .collect::<SkinResult<_>>()?;
+    Ok(Supports::Factored { factors, bytes })
 }
 
 /// `[f(0), ..., f(n - 1)]`, computed on the rayon pool longest job first: each worker takes the
@@ -89,7 +170,6 @@ pub(super) fn factor_supports(
 /// size by 2-3x, and an even split of the columns over the threads leaves one idle.
 pub(super) fn longest_first<T: Send>(cost: &[usize], f: impl Fn(usize) -> T + Sync) -> Vec<T> {
     use std::sync::atomic::{AtomicUsize, Ordering};
-    use std::sync::Mutex;
     let mut order: Vec<usize> = (0..cost.len()).collect();
     order.sort_by_key(|&i| std::cmp::Reverse(cost[i]));
     let next = AtomicUsize::new(0);
