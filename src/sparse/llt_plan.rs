@@ -52,7 +52,13 @@ impl LltPlan {
     /// a second thread makes faer's factorisation slower; callers factor blocks in parallel).
     pub fn factor(self, a: &Csc) -> Result<SparseLlt, String> {
         let symbolic = self.symbolic;
-        let mut values = vec![0.0; symbolic.len_val()];
+        // Reserved fallibly: a refused allocation (an address-space limit) is an error, not an
+        // abort of the process.
+        let mut values = Vec::new();
+        values
+            .try_reserve_exact(symbolic.len_val())
+            .map_err(|_| "out of memory for the factor's values".to_string())?;
+        values.resize(symbolic.len_val(), 0.0);
         let par = Par::Seq;
         let mut mem = MemBuffer::try_new(
             symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default()),
