@@ -141,6 +141,22 @@ def test_memory_estimate_refuses_an_asset_that_cannot_fit(library, tmp_path):
     assert not (tmp_path / "knight.dmat").exists()
 
 
+def test_the_solve_keeps_within_what_the_worker_has_left(library, tmp_path, monkeypatch):
+    # Past the estimate, the solve is given the worker's limit less what the process holds:
+    # here about nothing, so BBW refuses before factoring, and the record says why.
+    import psutil
+
+    manifest, _ = library
+    spec = next(s for s in batch.find_assets(manifest) if s["name"] == "knight")
+    opts = batch._options(spec, {"format": "dmat"})
+    monkeypatch.setattr(batch, "estimate_peak_bytes", lambda *args: 0)
+    limit = psutil.Process().memory_info().rss + 10_000
+    rec = batch.run_asset(spec, opts, batch._key(spec, opts), str(tmp_path), memory_limit=limit)
+    assert rec["status"] == "failed", rec
+    assert rec["reason"].startswith("MemoryError: memory_limit: the Cholesky factor of B_ff")
+    assert not (tmp_path / "knight.dmat").exists()
+
+
 def _stop(procs):
     for p in procs:
         if p.poll() is None:

@@ -199,6 +199,22 @@ def test_weights_of_a_tet_mesh_make_an_asset_of_its_surface(data_dir, tmp_path):
     assert (a["W"][clear].argmax(1) == W[clear].argmax(1)).all()
 
 
+def test_weights_beyond_memory_limit_fail_before_factoring(data_dir, tmp_path):
+    # The knight's factor of B_ff alone takes about 1.2 MiB: 500kB cannot hold it.
+    d = data_dir / "decimated-knight"
+    out = tmp_path / "knight.dmat"
+    mesh, tgf = d / "decimated-knight.mesh", d / "decimated-knight.tgf"
+    run = skinrs_cli("-q", "weights", mesh, tgf, "-o", out, "--memory-limit", "500kB")
+    assert_one_line_error(run, "memory_limit: the Cholesky factor of B_ff")
+    assert not out.exists()
+    run = skinrs_cli("weights", mesh, tgf, "-o", out, "--memory-limit", "1GiB")
+    assert run.returncode == 0, run.stderr
+    V, T, _ = skinrs.io.read_mesh(mesh)
+    C, BE = skinrs.io.read_tgf(tgf)
+    W = skinrs.bbw_dual(V, T, C, BE=BE, tol=1e-6)  # the command's default tol
+    np.testing.assert_array_equal(skinrs.io.read_dmat(out), W)
+
+
 def test_weights_of_a_tet_mesh_reduced_to_k_influences(data_dir, tmp_path):
     """Poisson reduction works on the boundary triangles; interior rows keep their k largest."""
     d = data_dir / "decimated-knight"
@@ -312,6 +328,8 @@ def test_bad_input_gives_one_line_and_exit_2(arm, tmp_path):
         (("weights", mesh, tgf, "--tol", "-1", "-o", out), "--tol"),
         (("weights", mesh, tgf, "--tol", "nan", "-o", out), "--tol"),
         (("weights", mesh, tgf, "--steps", "0", "--method", "field", "-o", out), "--steps"),
+        (("weights", mesh, tgf, "--memory-limit", "4XB", "-o", out), "--memory-limit"),
+        (("weights", mesh, tgf, "--memory-limit", "-1GB", "-o", out), "--memory-limit"),
         (("weights", mesh, tgf, "--frobnicate", "-o", out), "--frobnicate"),
         (("weights", mesh, tgf), "-o"),
         (("reduce", d / "w.csv", "-k", "1", "--method", "k-largest", "-o", d / "o.csv"), "w.csv"),

@@ -144,13 +144,15 @@ def _solve_weights(
         return fld.vertex_weights()
     W: Floats
     tol = args.tol if args.tol is not None else 1e-6
+    # Bytes of the solve (``skinrs weights --memory-limit``, or what a batch worker has left).
+    memory_limit = getattr(args, "memory_limit", None)
     prog = Progress(args.quiet, 100.0, "%", gap_progress(tol))
     try:
         if mesh["T"] is not None:
             from .bbw import bbw_dual
 
-            W, res = bbw_dual(V, mesh["T"], C, BE=BE, P=P, tol=tol, callback=prog,
-                              return_info=True)  # fmt: skip
+            W, res = bbw_dual(V, mesh["T"], C, BE=BE, P=P, tol=tol, memory_limit=memory_limit,
+                              callback=prog, return_info=True)  # fmt: skip
             info["gap"], info["energy"] = res["relative_gap"], res["energy"]
             return W
         from .io._weld import weld
@@ -164,7 +166,8 @@ def _solve_weights(
             say(args, f"merged {len(V) - len(Vw)} vertices that repeat a position (and left "
                       f"out {len(F) - len(Fw)} faces that collapsed)")  # fmt: skip
         say(args, "meshing the inside with the skeleton (TetGen) ...")
-        W, res = skin_weights(Vw, Fw, C, BE, P, tol=tol, callback=prog, return_info=True)
+        W, res = skin_weights(Vw, Fw, C, BE, P, tol=tol, memory_limit=memory_limit,
+                              callback=prog, return_info=True)  # fmt: skip
         info["gap"], info["energy"] = res["relative_gap"], res["energy"]
         info["volume_vertices"] = res["volume_vertices"]
         return W[vertex_map]

@@ -147,6 +147,12 @@ def run_asset(
 
     args = argparse.Namespace(mesh=spec["mesh"], skeleton=spec["skeleton"], output=out,
                               quiet=True, **{k: v for k, v in opts.items() if k != "format"})  # fmt: skip
+    if limit:
+        # The solve keeps within what the worker has left: beyond it BBW finishes with L-BFGS,
+        # or fails with a record, rather than the nanny killing the worker.
+        import psutil
+
+        args.memory_limit = max(limit - psutil.Process().memory_info().rss, 1)
     try:
         if limit:
             mesh = cli.read_any_mesh(spec["mesh"])
@@ -161,7 +167,7 @@ def run_asset(
 
         with _Watch(timeout, on_timeout) as watch:
             job = cli.weights_job(args)
-    except (UsageError, ValueError, OSError) as e:
+    except (UsageError, ValueError, OSError, MemoryError) as e:
         return failed(f"{type(e).__name__}: {e}")
     W = job["W"]
     rec.update(status="done", seconds=time.time() - rec["started"], solve_seconds=job["seconds"],

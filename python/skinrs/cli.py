@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 import sys
 from collections.abc import Callable, Sequence
 from typing import NoReturn
@@ -74,6 +75,18 @@ def _number(s: str, cast: Callable[[str], float], zero: bool, what: str) -> floa
     return x
 
 
+_SIZE_UNITS = {"": 1, "B": 1, "KB": 10**3, "MB": 10**6, "GB": 10**9, "TB": 10**12,
+               "KIB": 2**10, "MIB": 2**20, "GIB": 2**30, "TIB": 2**40}  # fmt: skip
+
+
+def _size(s: str) -> float:
+    """An argparse type: a positive number of bytes, with an optional unit (4GB, 512MiB)."""
+    m = re.fullmatch(r"\s*([0-9.eE+]+)\s*([A-Za-z]*)\s*", s)
+    if m is None or m.group(2).upper() not in _SIZE_UNITS:
+        raise argparse.ArgumentTypeError(f"must be a size such as 4GB or 512MiB, got {s!r}")
+    return _number(m.group(1), float, False, "positive size") * _SIZE_UNITS[m.group(2).upper()]
+
+
 def _add_weight_options(p: argparse.ArgumentParser) -> None:
     """The options of ``skinrs weights`` (``skinrs batch`` takes the same)."""
     p.add_argument("--method", choices=("bbw", "field"), default="bbw",
@@ -102,6 +115,9 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("-o", "--output", required=True, metavar="OUT",
                    help="output: .glb/.gltf (skinned asset), .dmat, .npz or .csv")  # fmt: skip
     _add_weight_options(w)
+    w.add_argument("--memory-limit", type=_size, default=None, metavar="SIZE",
+                   help="memory of the BBW solve, e.g. 4GB (default: half the RAM; beyond it "
+                   "the solve finishes with L-BFGS, or fails before factoring)")  # fmt: skip
     w.set_defaults(run=cmd_weights)
 
     b = sub.add_parser("batch", help="weights of many assets on Dask (local or a cluster)",
@@ -168,7 +184,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("skinrs: interrupted", file=sys.stderr)
         return 130
-    except (UsageError, ValueError, OSError, ImportError) as e:
+    except (UsageError, ValueError, OSError, ImportError, MemoryError) as e:
         if args.debug:
             raise
         print(f"skinrs {args.command}: error: {e}", file=sys.stderr)
