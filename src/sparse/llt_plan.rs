@@ -51,6 +51,11 @@ impl LltPlan {
     /// The numeric factor of `a`, the matrix this plan analysed (single-threaded: on two cores
     /// a second thread makes faer's factorisation slower; callers factor blocks in parallel).
     pub fn factor(self, a: &Csc) -> Result<SparseLlt, String> {
+        self.factor_with(a, Par::Seq)
+    }
+
+    /// [`LltPlan::factor`] with the parallelism `par`.
+    pub fn factor_with(self, a: &Csc, par: Par) -> Result<SparseLlt, String> {
         let symbolic = self.symbolic;
         // Reserved fallibly: a refused allocation (an address-space limit) is an error, not an
         // abort of the process.
@@ -59,7 +64,6 @@ impl LltPlan {
             .try_reserve_exact(symbolic.len_val())
             .map_err(|_| "out of memory for the factor's values".to_string())?;
         values.resize(symbolic.len_val(), 0.0);
-        let par = Par::Seq;
         let mut mem = MemBuffer::try_new(
             symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default()),
         )

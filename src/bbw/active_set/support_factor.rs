@@ -5,6 +5,7 @@ use std::sync::Mutex;
 use std::time::Instant;
 
 use faer::sparse::SymbolicSparseColMat;
+use faer::Par;
 use rayon::prelude::*;
 
 use crate::bbw::options::{BbwInfo, BbwOptions};
@@ -53,9 +54,9 @@ impl SupportPlan {
         self.block.as_ref().map_or(0, |(_, p)| p.factor_bytes())
     }
 
-    fn factor(self) -> SkinResult<SupportFactor> {
+    fn factor(self, par: Par) -> SkinResult<SupportFactor> {
         let llt = match self.block {
-            Some((sub, plan)) => Some(plan.factor(&sub).map_err(failed)?),
+            Some((sub, plan)) => Some(plan.factor_with(&sub, par).map_err(failed)?),
             None => None,
         };
         Ok(SupportFactor { idx: self.idx, llt })
@@ -156,9 +157,19 @@ fn factor_supports(a: &Csc, support: &[bool], nf: usize, budget: usize) -> SkinR
     if bytes > budget {
         return Ok(Supports::OverBudget { bytes });
     }
+    // The smallest block is factored last, while the other threads run out of blocks: its
+    // factorisation may use them (faer's parallel supernodal factorisation gives the same
+    // values as its sequential one). With 3 columns on 2 threads a thread was otherwise idle
+    // for a third of each round.
+    let last = (0..sizes.len()).min_by_key(|&j| sizes[j]);
     let factors = longest_first(&sizes, |j| {
         let plan = plans[j].lock().ok().and_then(|mut p| p.take());
-        plan.expect("each plan is factored once").factor()
+        let par = if Some(j) == last {
+            Par::rayon(0)
+        } else {
+            Par::Seq
+        };
+        plan.expect("each plan is factored once").factor(par)
     })
     .into_iter()
     .collect::<SkinResult<_>>()?;
