@@ -189,6 +189,24 @@ def test_support_factors_beyond_memory_limit_hand_over_to_lbfgs():
     assert_feasible(W, f)
 
 
+def test_a_later_round_beyond_memory_limit_hands_over_from_its_multipliers():
+    """A limit one byte below the largest round's support factors: the rounds before it run,
+    then L-BFGS goes on from the last round's multipliers to tol."""
+    f = load("disc-holes")
+    args = (f["V"], f["T"], f["b"], f["bc"])
+    kw = {"mass": str(f["mass_kind"]), "tol": 1e-6, "return_info": True}
+    _, full = skinrs.bbw_dual_constrained(*args, **kw)
+    limit = full["factor_bytes"] + full["vector_bytes"] + full["support_factor_bytes"] - 1
+    with pytest.warns(RuntimeWarning, match="memory_limit"):
+        W, info = skinrs.bbw_dual_constrained(*args, memory_limit=limit, **kw)
+    assert info["memory_fallback"] and info["fallbacks"] == 1, info
+    assert 1 <= info["rounds"] < full["rounds"] and info["converged"], info
+    dW, relE = against_qp(f, W, info)
+    assert abs(relE) <= 1e-6 and dW <= 1e-4
+    assert info["lower_bound"] <= float(f["energy"]) * (1 + 1e-12)
+    assert_feasible(W, f)
+
+
 def test_box_variant_hands_over_to_lbfgs_beyond_memory_limit(data_dir):
     """Without partition of unity the rounds factor one block per column too; beyond
     memory_limit L-BFGS finishes, and still reproduces libigl's MATLAB active-set oracle."""
