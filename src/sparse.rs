@@ -1,8 +1,6 @@
 //! Small helpers around `faer` sparse matrices used across capabilities.
 
-use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
 use faer::sparse::{SparseColMat, Triplet};
-use faer::Side;
 
 use crate::error::{SkinError, SkinResult};
 
@@ -33,13 +31,6 @@ pub fn diagonal(d: &[f64]) -> SkinResult<Csc> {
         .collect();
     from_triplets(d.len(), d.len(), &t)
 }
-/// Sparse Cholesky factor of the SPD matrix `a` (its lower triangle is read), or why it failed.
-pub(crate) fn cholesky(a: &Csc) -> Result<Llt<usize, f64>, String> {
-    let symbolic = SymbolicLlt::try_new(a.symbolic(), Side::Lower)
-        .map_err(|e| format!("symbolic analysis: {e:?}"))?;
-    Llt::try_new_with_symbolic(symbolic, a.as_ref(), Side::Lower).map_err(|e| format!("{e:?}"))
-}
-
 /// The tridiagonal `[-1 2 -1]` matrix of a path graph `0 - 1 - ... - (n-1)` (a test fixture).
 #[cfg(test)]
 pub(crate) fn path_matrix(n: usize) -> Csc {

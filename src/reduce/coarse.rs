@@ -20,14 +20,11 @@
 //! `Q_vu (B_v^T B_u)'_ts` at (`(A(v), S_vt)`, `(A(u), S_us)`), where `C'` is `B_v^T B_u` with
 //! row and column means removed (the `- 1/k` parts of `z`).
 
-use faer::linalg::solvers::Solve;
-use faer::sparse::linalg::solvers::Llt;
 use faer::sparse::Triplet;
-use faer::MatMut;
 use rayon::prelude::*;
 
 use crate::error::{SkinError, SkinResult};
-use crate::sparse::{cholesky, from_triplets};
+use crate::sparse::{from_triplets, LltPlan, SparseLlt};
 
 use super::problem::Problem;
 
@@ -38,7 +35,7 @@ const AGGREGATE: usize = 64;
 pub(crate) struct Coarse {
     /// Coarse unknown of every (vertex, slot): `(n, k)` flat.
     dof: Vec<usize>,
-    llt: Llt<usize, f64>,
+    llt: SparseLlt,
     nc: usize,
     k: usize,
 }
@@ -175,7 +172,8 @@ impl Coarse {
             trip.push(Triplet::new(c, c, 1e-10 * dmax + 1e-12 * d));
         }
         let hc = from_triplets(nc, nc, &trip)?;
-        let llt = cholesky(&hc)
+        let llt = LltPlan::new(&hc)
+            .and_then(|plan| plan.factor(&hc))
             .map_err(|e| SkinError::Numerical(format!("coarse Cholesky failed: {e}")))?;
         Ok(Coarse { dof, llt, nc, k })
     }
@@ -190,9 +188,7 @@ impl Coarse {
                 rc[self.dof[v * k + t]] += x - mean;
             }
         }
-        let nc = self.nc;
-        self.llt
-            .solve_in_place(MatMut::from_column_major_slice_mut(&mut rc, nc, 1));
+        self.llt.solve_in_place(&mut rc);
         z.par_chunks_mut(k).enumerate().for_each(|(v, zv)| {
             let d = &self.dof[v * k..(v + 1) * k];
             let mean = d.iter().map(|&c| rc[c]).sum::<f64>() / k as f64;

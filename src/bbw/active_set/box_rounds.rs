@@ -109,14 +109,13 @@ pub(super) fn box_rounds(
         if changes == 0 {
             return Ok(Outcome::Done);
         }
+        y.extend_from_slice(&u);
         if watch.stalled(best.relative_gap(), STALL_ROUNDS) {
             if best.relative_gap() <= opts.tol {
                 return Ok(Outcome::Done); // certified; the last swaps only cycle at round-off
             }
-            y.extend_from_slice(&u);
             return Ok(Outcome::Stalled(y));
         }
-        y.extend_from_slice(&u);
         last_dual = Some(y);
     }
     Ok(Outcome::Done)
