@@ -37,6 +37,7 @@ mod box_rounds;
 mod next_support;
 mod pcg;
 mod pou_rounds;
+mod smooth;
 mod spread;
 mod stall;
 mod support_factor;

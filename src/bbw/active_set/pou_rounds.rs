@@ -10,6 +10,7 @@ use rayon::prelude::*;
 
 use super::next_support::{next_support, SignThresholds};
 use super::pcg::{pcg, row_sums_minus_one};
+use super::smooth::gauss_seidel_pou;
 use super::spread::spread_negative;
 use super::stall::{Outcome, OwnBounds, StallWatch, Watch, MAX_ROUNDS};
 use super::support_factor::{factor_within_limit, longest_first};
@@ -38,14 +39,33 @@ const CRAWL: f64 = 4.0;
 /// each further such round.
 const DILATION_PAUSE: usize = 3;
 
+/// Projected Gauss-Seidel sweeps over a round's projected weights ([`gauss_seidel_pou`]).
+const SMOOTH_SWEEPS: usize = 10;
+
+/// The next support while the rounds follow the smoother: the entries whose smoothed weight is
+/// above `above`, and those the sign rules join (`rules` on entries off `support`).
+///
+/// The smoothed weights settle the zero set near the supports' edges, which the sign rules
+/// move a ring per round; where they are below `above` (the solve's `tol`) they are the
+/// smoother's slowly decaying tails, which at 0 overgrow the supports in 2D.
+fn smoothed_support(smoothed: &[f64], support: &[bool], rules: &[bool], above: f64) -> Vec<bool> {
+    smoothed
+        .iter()
+        .zip(support.iter().zip(rules))
+        .map(|(&x, (&was, &joins))| x > above || (joins && !was))
+        .collect()
+}
+
 /// The rounds' state, kept across an L-BFGS intermission: the support guess
 /// (`support[j * nf + i]`), the partition-of-unity multiplier, the CG tolerance and what
-/// decides the dilation of joins ([`next_support`]).
+/// decides the dilation of joins ([`next_support`]), and whether the next support follows the
+/// smoother ([`smoothed_support`]).
 pub(super) struct RoundsState {
     support: Vec<bool>,
     mu: Vec<f64>,
     cg_tol: f64,
     dilation: Dilation,
+    follow_smoother: bool,
 }
 
 /// The last round's own bounds, whether its joins were dilated, and the pause of dilation: none
@@ -85,6 +105,7 @@ impl RoundsState {
                 last_gap: f64::INFINITY,
                 last_upper: f64::INFINITY,
             },
+            follow_smoother: true,
         }
     }
 }
@@ -114,6 +135,7 @@ pub(super) fn pou_rounds(
             mu,
             cg_tol,
             dilation,
+            follow_smoother,
         } = &mut *state;
         let Some(factors) = factor_within_limit(prob, opts, support, info)? else {
             return Ok(Outcome::OverBudget(last_dual));
@@ -177,10 +199,14 @@ pub(super) fn pou_rounds(
                 y[k] = grad + mu[k % nf];
             }
         }
-        // Certificate: projected w (upper bound), dual at y spread to >= 0 (lower bound).
+        // Certificate: projected w (upper bound), dual at y spread to >= 0 (lower bound). The
+        // smoothed weights are feasible too, never higher, and often a tighter upper bound.
         let feasible = project_pou(&w, nf, m);
         let upper = prob.energy(&feasible);
+        let smoothed = gauss_seidel_pou(&prob.a, &prob.g, &feasible, nf, m, SMOOTH_SWEEPS);
         best.offer(&w, feasible, upper);
+        let smoothed_upper = prob.energy(&smoothed);
+        best.offer(&smoothed, smoothed.clone(), smoothed_upper);
         // The dual's own recovered W(Y) is not offered as a primal candidate: it is smooth but
         // nowhere exactly zero, and once projected can win on energy by a hair while sitting
         // far off the optimum in flat directions.
@@ -206,6 +232,13 @@ pub(super) fn pou_rounds(
         // bones: every weight positive on most of the mesh) to crawl a ring per round. If the
         // overshoot also widened the gap, its weights dip negative over wide bands, and
         // going on from it costs more rounds than it saves: the round is undone.
+        // The smoother's support drops entries of tiny weight that the sign rules then join
+        // again; near the optimum the two can cycle (a 7.7k-vertex armadillo with 20 handles
+        // stalled at a gap of 7e-7). From the first round whose own gap did not fall, the sign
+        // rules alone decide.
+        if own_gap >= dilation.last_gap {
+            *follow_smoother = false;
+        }
         if dilation.last_dilated && upper > dilation.last_upper {
             dilation.paused_until = round.saturating_add(dilation.next_pause);
             dilation.next_pause = dilation.next_pause.saturating_mul(2);
@@ -223,8 +256,18 @@ pub(super) fn pou_rounds(
         dilation.last_upper = upper;
         let thresholds = SignThresholds::new(opts.tol, scale);
         let (next, n_w, n_y) = next_support(&prob.a, support, &w, &y, thresholds, dilate, nf);
+        let next = if *follow_smoother {
+            smoothed_support(&smoothed, support, &next, opts.tol)
+        } else {
+            next
+        };
         undilated = dilate.then(|| {
             let (plain, _, _) = next_support(&prob.a, support, &w, &y, thresholds, false, nf);
+            let plain = if *follow_smoother {
+                smoothed_support(&smoothed, support, &plain, opts.tol)
+            } else {
+                plain
+            };
             (plain, mu.clone())
         });
         let exact = n_w == 0 && n_y == 0;
