@@ -59,13 +59,14 @@ fn smoothed_support(smoothed: &[f64], support: &[bool], rules: &[bool], above: f
 /// The rounds' state, kept across an L-BFGS intermission: the support guess
 /// (`support[j * nf + i]`), the partition-of-unity multiplier, the CG tolerance and what
 /// decides the dilation of joins ([`next_support`]), and whether the next support follows the
-/// smoother ([`smoothed_support`]).
+/// smoother ([`smoothed_support`]) and how often its gap rose while it did.
 pub(super) struct RoundsState {
     support: Vec<bool>,
     mu: Vec<f64>,
     cg_tol: f64,
     dilation: Dilation,
     follow_smoother: bool,
+    smoother_rises: usize,
 }
 
 /// The last round's own bounds, whether its joins were dilated, and the pause of dilation: none
@@ -106,6 +107,7 @@ impl RoundsState {
                 last_upper: f64::INFINITY,
             },
             follow_smoother: true,
+            smoother_rises: 0,
         }
     }
 }
@@ -136,6 +138,7 @@ pub(super) fn pou_rounds(
             cg_tol,
             dilation,
             follow_smoother,
+            smoother_rises,
         } = &mut *state;
         let Some(factors) = factor_within_limit(prob, opts, support, info)? else {
             return Ok(Outcome::OverBudget(last_dual));
@@ -237,7 +240,8 @@ pub(super) fn pou_rounds(
         // stalled at a gap of 7e-7). From the first round whose own gap did not fall, the sign
         // rules alone decide.
         if own_gap >= dilation.last_gap {
-            *follow_smoother = false;
+            *smoother_rises += 1;
+            *follow_smoother = *smoother_rises < 2;
         }
         if dilation.last_dilated && upper > dilation.last_upper {
             dilation.paused_until = round.saturating_add(dilation.next_pause);

@@ -110,10 +110,10 @@ mod tests {
     ) -> (f64, Vec<f64>) {
         let mut grad = g.to_vec();
         for (wc, gc) in w.chunks(nf).zip(grad.chunks_mut(nf)) {
-            for i in 0..nf {
+            for (i, &x) in wc.iter().enumerate() {
                 let rows = a.symbolic().row_idx_of_col_raw(i);
                 for (&k, &v) in rows.iter().zip(a.val_of_col(i)) {
-                    gc[k] += v * wc[i];
+                    gc[k] += v * x;
                 }
             }
         }
