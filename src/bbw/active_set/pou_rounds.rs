@@ -41,6 +41,8 @@ const DILATION_PAUSE: usize = 3;
 
 /// Projected Gauss-Seidel sweeps over a round's projected weights ([`gauss_seidel_pou`]).
 const SMOOTH_SWEEPS: usize = 10;
+/// The rounds follow the smoother's support until this many rounds' own gaps did not fall.
+const SMOOTHER_RISES: usize = 2;
 
 /// The next support while the rounds follow the smoother: the entries whose smoothed weight is
 /// above `above`, and those the sign rules join (`rules` on entries off `support`).
@@ -59,13 +61,12 @@ fn smoothed_support(smoothed: &[f64], support: &[bool], rules: &[bool], above: f
 /// The rounds' state, kept across an L-BFGS intermission: the support guess
 /// (`support[j * nf + i]`), the partition-of-unity multiplier, the CG tolerance and what
 /// decides the dilation of joins ([`next_support`]), and whether the next support follows the
-/// smoother ([`smoothed_support`]) and how often its gap rose while it did.
+/// smoother ([`smoothed_support`]): how many rounds' gaps have not fallen.
 pub(super) struct RoundsState {
     support: Vec<bool>,
     mu: Vec<f64>,
     cg_tol: f64,
     dilation: Dilation,
-    follow_smoother: bool,
     smoother_rises: usize,
 }
 
@@ -106,7 +107,6 @@ impl RoundsState {
                 last_gap: f64::INFINITY,
                 last_upper: f64::INFINITY,
             },
-            follow_smoother: true,
             smoother_rises: 0,
         }
     }
@@ -137,7 +137,6 @@ pub(super) fn pou_rounds(
             mu,
             cg_tol,
             dilation,
-            follow_smoother,
             smoother_rises,
         } = &mut *state;
         let Some(factors) = factor_within_limit(prob, opts, support, info)? else {
@@ -237,12 +236,16 @@ pub(super) fn pou_rounds(
         // going on from it costs more rounds than it saves: the round is undone.
         // The smoother's support drops entries of tiny weight that the sign rules then join
         // again; near the optimum the two can cycle (a 7.7k-vertex armadillo with 20 handles
-        // stalled at a gap of 7e-7). From the first round whose own gap did not fall, the sign
-        // rules alone decide.
+        // stalled at a gap of 7e-7). From the second round whose own gap did not fall, the
+        // sign rules alone decide (from the first, the 2D pants took 107 rounds, not 63).
         if own_gap >= dilation.last_gap {
             *smoother_rises += 1;
-            *follow_smoother = *smoother_rises < 2;
         }
+        let follow_smoother = *smoother_rises < SMOOTHER_RISES;
+        let with_smoother = |rules: Vec<bool>| match follow_smoother {
+            true => smoothed_support(&smoothed, support, &rules, opts.tol),
+            false => rules,
+        };
         if dilation.last_dilated && upper > dilation.last_upper {
             dilation.paused_until = round.saturating_add(dilation.next_pause);
             dilation.next_pause = dilation.next_pause.saturating_mul(2);
@@ -260,19 +263,10 @@ pub(super) fn pou_rounds(
         dilation.last_upper = upper;
         let thresholds = SignThresholds::new(opts.tol, scale);
         let (next, n_w, n_y) = next_support(&prob.a, support, &w, &y, thresholds, dilate, nf);
-        let next = if *follow_smoother {
-            smoothed_support(&smoothed, support, &next, opts.tol)
-        } else {
-            next
-        };
+        let next = with_smoother(next);
         undilated = dilate.then(|| {
             let (plain, _, _) = next_support(&prob.a, support, &w, &y, thresholds, false, nf);
-            let plain = if *follow_smoother {
-                smoothed_support(&smoothed, support, &plain, opts.tol)
-            } else {
-                plain
-            };
-            (plain, mu.clone())
+            (with_smoother(plain), mu.clone())
         });
         let exact = n_w == 0 && n_y == 0;
         if exact && *cg_tol <= CG_TOL_FINAL * opts.tol {
