@@ -124,7 +124,8 @@ def test_default_solver_is_active_set_and_reports_phases():
     assert info["relative_gap"] <= 1e-9
     for k in ("time_factor", "time_lbfgs", "time_active_set", "time_solve"):
         assert 0 <= info[k] <= info["time_solve"] + info["time_factor"]
-    parts = info["time_support_factor"] + info["time_cg"]
+    assert info["time_smooth"] > 0  # the smoother runs at least in the first round
+    parts = info["time_support_factor"] + info["time_cg"] + info["time_smooth"]
     assert 0 < parts <= info["time_active_set"]
 
 

@@ -263,9 +263,9 @@ def bbw_dual_constrained(
         them, and hand-overs to L-BFGS when the rounds stall), energy, lower_bound, gap,
         relative_gap, dual_objective, min_raw_weight, max_raw_weight, converged, seconds (the
         whole call) and seconds per phase: time_operators, time_factor, time_solve and within it
-        time_lbfgs, time_active_set (of which time_support_factor and time_cg); factor_bytes,
-        vector_bytes and support_factor_bytes (the factor of ``B_ff``, the dense vectors, and
-        the most the support factors of one round took or would have taken), and
+        time_lbfgs, time_active_set (of which time_support_factor, time_cg and time_smooth);
+        factor_bytes, vector_bytes and support_factor_bytes (the factor of ``B_ff``, the dense
+        vectors, and the most the support factors of one round took or would have taken), and
         memory_fallback (those did not fit ``memory_limit``).
 
     Returns

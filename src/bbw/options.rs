@@ -99,9 +99,11 @@ pub struct BbwInfo {
     pub time_solve: f64,
     pub time_lbfgs: f64,
     pub time_active_set: f64,
-    /// Within the active-set phase: factoring the per-column support blocks, and CG on `mu`.
+    /// Within the active-set phase: factoring the per-column support blocks, CG on `mu`, and
+    /// the smoother's sweeps.
     pub time_support_factor: f64,
     pub time_cg: f64,
+    pub time_smooth: f64,
     /// Bytes of the factor of `B_ff`, of the dense vectors ([`BbwOptions::vector_bytes`]), and
     /// the most the support factors of one active-set round took (or would have taken, when
     /// they did not fit `memory_limit`).

@@ -164,6 +164,7 @@ fn py_bbw_dual<'py>(
     d.set_item("time_support_factor", info.time_support_factor)?;
     d.set_item("fallbacks", info.fallbacks)?;
     d.set_item("time_cg", info.time_cg)?;
+    d.set_item("time_smooth", info.time_smooth)?;
     d.set_item("factor_bytes", info.factor_bytes)?;
     d.set_item("vector_bytes", info.vector_bytes)?;
     d.set_item("support_factor_bytes", info.support_factor_bytes)?;

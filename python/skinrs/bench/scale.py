@@ -213,8 +213,8 @@ def main(argv: list[str] | None = None) -> int:
         return _worker(method, float(tol), path)
     paths = build_series(_data_dir(args.data), Path(args.cache), args.sizes)
     print("\n| size | n | tets | method | L-BFGS it. | rounds | factor B_ff s | L-BFGS s | "
-          "support factors s | CG s | wall s | CPU s | peak RSS MB | energy |")  # fmt: skip
-    print("|---|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+          "support factors s | CG s | smoother s | wall s | CPU s | peak RSS MB | energy |")  # fmt: skip
+    print("|---|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     paper_on = not args.no_paper
     for name in [s[0] for s in SIZES if s[0] in paths]:
         z = np.load(paths[name])
@@ -235,6 +235,7 @@ def main(argv: list[str] | None = None) -> int:
                 f"| {name} | {n} | {nt} | {label} | {r['iterations']} | "
                 f"{_cell(r, 'rounds', 'd')} | {r['time_factor']:.1f} | {lb:.1f} | "
                 f"{_cell(r, 'time_support_factor', '.1f')} | {_cell(r, 'time_cg', '.1f')} | "
+                f"{_cell(r, 'time_smooth', '.1f')} | "
                 f"{r['wall']:.1f} | {r['cpu']:.1f} | {r['peak_rss_mb']:.0f} | "
                 f"{r['energy_check']:.10g} |",
                 flush=True,

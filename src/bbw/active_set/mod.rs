@@ -20,8 +20,8 @@
 //! Entries of the support whose weight came out negative leave it, entries off it whose
 //! multiplier `y` came out negative join it, damped and dilated ([`next_support`]), and the
 //! round repeats until no sign is violated (the KKT conditions then hold to round-off)
-//! ([`pou_rounds`]). Each round's weights are also smoothed by projected Gauss-Seidel
-//! ([`smooth`]). While the rounds' gap keeps falling, the smoothed weights name the entries
+//! ([`pou_rounds`]). While the rounds' gap keeps falling, each round's weights are also
+//! smoothed by projected Gauss-Seidel ([`smooth`]), and the smoothed weights name the entries
 //! that stay.
 //!
 //! The first support comes from a short run of the paper's L-BFGS on the dual (a duality gap of

@@ -10,10 +10,52 @@
 //! nonlinear Gauss-Seidel, which never raises the energy; as the smoother of truncated
 //! nonsmooth Newton multigrid (Graeser & Kornhuber 2009) it settles the zero set locally,
 //! where a round's exact solve on a support guess corrects it globally.
+//!
+//! The rows are swept colour by colour ([`Colouring`]): rows of one colour are not coupled by
+//! `A`, so their updates are independent and run in parallel, and the sweep is still
+//! Gauss-Seidel (in the order of the colours), with the same result on any number of threads.
 
-/// `sweeps` forward Gauss-Seidel sweeps over the rows of `w` (see the module docs).
+use rayon::prelude::*;
+
+use crate::sparse::Csc;
+
+/// A partition of `A`'s rows into classes of rows no two of which are coupled (`a_ik = 0`):
+/// greedy colouring in row order, each row taking the smallest colour none of its neighbours
+/// holds.
+pub(super) struct Colouring {
+    classes: Vec<Vec<usize>>,
+}
+
+impl Colouring {
+    pub fn new(a: &Csc) -> Self {
+        let n = a.nrows();
+        let mut colour = vec![usize::MAX; n];
+        let mut taken: Vec<usize> = Vec::new(); // taken[c] == i: colour c is held by a neighbour of i
+        let mut classes: Vec<Vec<usize>> = Vec::new();
+        for i in 0..n {
+            for &k in a.symbolic().row_idx_of_col_raw(i) {
+                if let Some(&c) = colour.get(k).filter(|&&c| c != usize::MAX) {
+                    taken[c] = i;
+                }
+            }
+            let c = (0..classes.len())
+                .find(|&c| taken[c] != i)
+                .unwrap_or(classes.len());
+            if c == classes.len() {
+                classes.push(Vec::new());
+                taken.push(usize::MAX);
+            }
+            colour[i] = c;
+            classes[c].push(i);
+        }
+        Colouring { classes }
+    }
+}
+
+/// `sweeps` Gauss-Seidel sweeps over the rows of `w`, colour by colour (see the module docs).
 pub(super) fn gauss_seidel_pou(
-    a: &crate::sparse::Csc,
+    a: &Csc,
+    colouring: &Colouring,
     g: &[f64],
     w: &[f64],
     nf: usize,
@@ -22,44 +64,67 @@ pub(super) fn gauss_seidel_pou(
 ) -> Vec<f64> {
     // Row-major, so that a row's update reads its neighbours' rows contiguously.
     let mut rows = vec![0.0; nf * m];
-    for j in 0..m {
-        for i in 0..nf {
-            rows[i * m + j] = w[j * nf + i];
-        }
-    }
-    let mut target = vec![0.0; m];
-    let mut scratch = Vec::with_capacity(m);
+    rows.par_chunks_mut(m).enumerate().for_each(|(i, r)| {
+        r.iter_mut()
+            .enumerate()
+            .for_each(|(j, x)| *x = w[j * nf + i]);
+    });
+    let mut updates = Vec::new();
     for _ in 0..sweeps {
-        for i in 0..nf {
-            target
-                .iter_mut()
-                .enumerate()
-                .for_each(|(j, t)| *t = g[j * nf + i]);
-            let mut diag = 0.0;
-            let nbrs = a.symbolic().row_idx_of_col_raw(i);
-            for (&k, &v) in nbrs.iter().zip(a.val_of_col(i)) {
-                if k == i {
-                    diag = v;
-                    continue;
-                }
-                let wk = &rows[k * m..(k + 1) * m];
-                target.iter_mut().zip(wk).for_each(|(t, x)| *t += v * x);
+        for class in &colouring.classes {
+            updates.resize(class.len() * m, 0.0);
+            updates
+                .par_chunks_mut(m)
+                .zip(class.par_iter())
+                .for_each_init(Vec::new, |scratch, (target, &i)| {
+                    row_update(a, g, &rows, i, nf, target, scratch);
+                });
+            for (&i, target) in class.iter().zip(updates.chunks(m)) {
+                rows[i * m..(i + 1) * m].copy_from_slice(target);
             }
-            if diag <= 0.0 {
-                continue;
-            }
-            target.iter_mut().for_each(|t| *t /= -diag);
-            project_simplex(&mut target, &mut scratch);
-            rows[i * m..(i + 1) * m].copy_from_slice(&target);
         }
     }
     let mut out = vec![0.0; nf * m];
-    for j in 0..m {
-        for i in 0..nf {
-            out[j * nf + i] = rows[i * m + j];
-        }
-    }
+    out.par_chunks_mut(nf).enumerate().for_each(|(j, col)| {
+        col.iter_mut()
+            .enumerate()
+            .for_each(|(i, x)| *x = rows[i * m + j]);
+    });
     out
+}
+
+/// Row `i`'s minimiser with the other rows of `rows` fixed, into `target`; row `i` itself
+/// when `a_ii` is not positive.
+fn row_update(
+    a: &Csc,
+    g: &[f64],
+    rows: &[f64],
+    i: usize,
+    nf: usize,
+    target: &mut [f64],
+    scratch: &mut Vec<f64>,
+) {
+    let m = target.len();
+    target
+        .iter_mut()
+        .enumerate()
+        .for_each(|(j, t)| *t = g[j * nf + i]);
+    let mut diag = 0.0;
+    let nbrs = a.symbolic().row_idx_of_col_raw(i);
+    for (&k, &v) in nbrs.iter().zip(a.val_of_col(i)) {
+        if k == i {
+            diag = v;
+            continue;
+        }
+        let wk = &rows[k * m..(k + 1) * m];
+        target.iter_mut().zip(wk).for_each(|(t, x)| *t += v * x);
+    }
+    if diag <= 0.0 {
+        target.copy_from_slice(&rows[i * m..(i + 1) * m]);
+        return;
+    }
+    target.iter_mut().for_each(|t| *t /= -diag);
+    project_simplex(target, scratch);
 }
 
 /// Euclidean projection of `u` onto the simplex `{x >= 0, sum x = 1}`, in place: `x = max(u -
@@ -125,15 +190,59 @@ mod tests {
         (e, grad)
     }
 
+    /// A `k x k` grid's rows coupled to their 8 neighbours (diagonally dominant).
+    fn nine_point_grid(k: usize) -> crate::sparse::Csc {
+        let mut t = Vec::new();
+        for i in 0..k * k {
+            for r in i / k..(i / k + 2).min(k) {
+                for c in (i % k).saturating_sub(1)..(i % k + 2).min(k) {
+                    let j = r * k + c;
+                    if j > i {
+                        t.push(faer::sparse::Triplet::new(i, j, -1.0));
+                        t.push(faer::sparse::Triplet::new(j, i, -1.0));
+                    }
+                }
+            }
+            t.push(faer::sparse::Triplet::new(i, i, 9.0));
+        }
+        crate::sparse::from_triplets(k * k, k * k, &t).unwrap()
+    }
+
+    #[test]
+    fn colours_cover_every_row_once_and_never_couple_two() {
+        let a = crate::sparse::path_matrix(9);
+        let classes = Colouring::new(&a).classes;
+        // A path's rows alternate between two colours.
+        assert_eq!(classes, vec![vec![0, 2, 4, 6, 8], vec![1, 3, 5, 7]]);
+        let a = nine_point_grid(7);
+        let classes = Colouring::new(&a).classes;
+        // The 9-point stencil's rows in row order take 4 colours, 2 x 2 blocks of the grid.
+        assert_eq!(classes.len(), 4);
+        let mut seen = vec![0; a.nrows()];
+        for class in &classes {
+            for &i in class {
+                seen[i] += 1;
+                for &k in a.symbolic().row_idx_of_col_raw(i) {
+                    assert!(
+                        k == i || !class.contains(&k),
+                        "rows {i} and {k} share a colour"
+                    );
+                }
+            }
+        }
+        assert!(seen.iter().all(|&s| s == 1));
+    }
+
     #[test]
     fn sweeps_descend_to_the_constrained_minimum() {
         let (nf, m) = (30, 3);
         let a = crate::sparse::path_matrix(nf);
         let g: Vec<f64> = (0..nf * m).map(|k| (0.7 * k as f64).sin()).collect();
+        let colouring = Colouring::new(&a);
         let mut w = vec![1.0 / m as f64; nf * m];
         let (mut last, _) = energy_and_gradient(&a, &g, &w, nf);
         for _ in 0..3000 {
-            w = gauss_seidel_pou(&a, &g, &w, nf, m, 1);
+            w = gauss_seidel_pou(&a, &colouring, &g, &w, nf, m, 1);
             let (e, _) = energy_and_gradient(&a, &g, &w, nf);
             assert!(
                 e <= last + 1e-13,
