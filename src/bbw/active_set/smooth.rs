@@ -62,13 +62,10 @@ pub(super) fn gauss_seidel_pou(
     m: usize,
     sweeps: usize,
 ) -> Vec<f64> {
-    // Row-major, so that a row's update reads its neighbours' rows contiguously.
-    let mut rows = vec![0.0; nf * m];
-    rows.par_chunks_mut(m).enumerate().for_each(|(i, r)| {
-        r.iter_mut()
-            .enumerate()
-            .for_each(|(j, x)| *x = w[j * nf + i]);
-    });
+    // Row-major, so that a row's update reads its neighbours' rows and its own row of G
+    // contiguously.
+    let mut rows = row_major(w, nf, m);
+    let g = row_major(g, nf, m);
     let mut updates = Vec::new();
     for _ in 0..sweeps {
         for class in &colouring.classes {
@@ -77,7 +74,7 @@ pub(super) fn gauss_seidel_pou(
                 .par_chunks_mut(m)
                 .zip(class.par_iter())
                 .for_each_init(Vec::new, |scratch, (target, &i)| {
-                    row_update(a, g, &rows, i, nf, target, scratch);
+                    row_update(a, &g[i * m..(i + 1) * m], &rows, i, target, scratch);
                 });
             for (&i, target) in class.iter().zip(updates.chunks(m)) {
                 rows[i * m..(i + 1) * m].copy_from_slice(target);
@@ -93,22 +90,29 @@ pub(super) fn gauss_seidel_pou(
     out
 }
 
-/// Row `i`'s minimiser with the other rows of `rows` fixed, into `target`; row `i` itself
-/// when `a_ii` is not positive.
+/// The `nf x m` column-major `x` stored row by row.
+fn row_major(x: &[f64], nf: usize, m: usize) -> Vec<f64> {
+    let mut rows = vec![0.0; nf * m];
+    rows.par_chunks_mut(m).enumerate().for_each(|(i, r)| {
+        r.iter_mut()
+            .enumerate()
+            .for_each(|(j, v)| *v = x[j * nf + i]);
+    });
+    rows
+}
+
+/// Row `i`'s minimiser with the other rows of `rows` fixed, into `target`, given its row
+/// `g_i` of `G`; row `i` itself when `a_ii` is not positive.
 fn row_update(
     a: &Csc,
-    g: &[f64],
+    g_i: &[f64],
     rows: &[f64],
     i: usize,
-    nf: usize,
     target: &mut [f64],
     scratch: &mut Vec<f64>,
 ) {
     let m = target.len();
-    target
-        .iter_mut()
-        .enumerate()
-        .for_each(|(j, t)| *t = g[j * nf + i]);
+    target.copy_from_slice(g_i);
     let mut diag = 0.0;
     let nbrs = a.symbolic().row_idx_of_col_raw(i);
     for (&k, &v) in nbrs.iter().zip(a.val_of_col(i)) {
