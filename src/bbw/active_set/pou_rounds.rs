@@ -42,7 +42,8 @@ const DILATION_PAUSE: usize = 3;
 /// Projected Gauss-Seidel sweeps over a round's projected weights ([`gauss_seidel_pou`]).
 const SMOOTH_SWEEPS: usize = 10;
 /// The rounds run the smoother and follow its support until this many rounds' own gaps did
-/// not fall; after that its upper bound has saved no round on any fixture or generated case.
+/// not fall; after that its upper bound saved no round (hand-403, big2d, the tubes of `bench
+/// bbw`, the armadillos of `bench scale`).
 const SMOOTHER_RISES: usize = 2;
 
 /// The next support while the rounds follow the smoother: the entries whose smoothed weight is

@@ -30,12 +30,13 @@ impl Colouring {
     pub fn new(a: &Csc) -> Self {
         let n = a.nrows();
         let mut colour = vec![usize::MAX; n];
-        let mut taken: Vec<usize> = Vec::new(); // taken[c] == i: colour c is held by a neighbour of i
+        // taken[c] == i: a neighbour of row i holds colour c.
+        let mut taken: Vec<usize> = Vec::new();
         let mut classes: Vec<Vec<usize>> = Vec::new();
         for i in 0..n {
             for &k in a.symbolic().row_idx_of_col_raw(i) {
-                if let Some(&c) = colour.get(k).filter(|&&c| c != usize::MAX) {
-                    taken[c] = i;
+                if colour[k] != usize::MAX {
+                    taken[colour[k]] = i;
                 }
             }
             let c = (0..classes.len())
@@ -62,6 +63,9 @@ pub(super) fn gauss_seidel_pou(
     m: usize,
     sweeps: usize,
 ) -> Vec<f64> {
+    if m == 0 {
+        return w.to_vec();
+    }
     // Row-major, so that a row's update reads its neighbours' rows and its own row of G
     // contiguously.
     let mut rows = row_major(w, nf, m);
