@@ -63,7 +63,7 @@ pub(super) fn gauss_seidel_pou(
     m: usize,
     sweeps: usize,
 ) -> Vec<f64> {
-    if m == 0 {
+    if m == 0 || nf == 0 {
         return w.to_vec();
     }
     // Row-major, so that a row's update reads its neighbours' rows and its own row of G
@@ -85,22 +85,18 @@ pub(super) fn gauss_seidel_pou(
             }
         }
     }
-    let mut out = vec![0.0; nf * m];
-    out.par_chunks_mut(nf).enumerate().for_each(|(j, col)| {
-        col.iter_mut()
-            .enumerate()
-            .for_each(|(i, x)| *x = rows[i * m + j]);
-    });
-    out
+    // Back to column-major: `rows` is the column-major storage of the `m x nf` transpose.
+    row_major(&rows, m, nf)
 }
 
-/// The `nf x m` column-major `x` stored row by row.
-fn row_major(x: &[f64], nf: usize, m: usize) -> Vec<f64> {
-    let mut rows = vec![0.0; nf * m];
-    rows.par_chunks_mut(m).enumerate().for_each(|(i, r)| {
+/// The column-major `nrows x ncols` matrix `x` stored row by row (which is the column-major
+/// storage of its transpose).
+fn row_major(x: &[f64], nrows: usize, ncols: usize) -> Vec<f64> {
+    let mut rows = vec![0.0; nrows * ncols];
+    rows.par_chunks_mut(ncols).enumerate().for_each(|(i, r)| {
         r.iter_mut()
             .enumerate()
-            .for_each(|(j, v)| *v = x[j * nf + i]);
+            .for_each(|(j, v)| *v = x[j * nrows + i]);
     });
     rows
 }
