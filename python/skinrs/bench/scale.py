@@ -10,10 +10,12 @@ interior vertex of each mesh; ``bc`` is the identity. Meshes are cached in ``--c
 For each size it prints n, tets, and for skinrs ``bbw_dual_constrained`` (default solver, tol
 ``--tol``, default 1e-9) and the paper's method (``paper_reference``: SciPy SuperLU on the KKT
 system + L-BFGS on ``Y = U o U``, tol ``--paper-tol``, default 1e-6): L-BFGS iterations,
-active-set rounds, time per phase, wall and CPU time, peak RSS and the energy. Each solve runs in
-its own process (so peak RSS is its own), under a wall-time limit and an address-space cap; the
-paper's method is not run at sizes after the first one where it exceeded ``--paper-limit``
-(600 s). Not a test: nothing is asserted.
+active-set rounds (", then L-BFGS" when a round's support factors would not fit skinrs's
+``memory_limit``, ``--memory-limit``, and L-BFGS finished the solve), time per phase, wall and CPU
+time, the largest round's support factors, peak RSS, the energy and skinrs's certified gap. Each
+solve runs in its own process (so peak RSS is its own), under a wall-time limit and an
+address-space cap (``--mem-gb``); the paper's method is not run at sizes after the first one where
+it exceeded ``--paper-limit`` (600 s). Not a test: nothing is asserted.
 """
 
 from __future__ import annotations
@@ -138,7 +140,7 @@ def build_series(data: Path, cache: Path, names: list[str]) -> dict[str, Path]:
     return {n: p for n, p in paths.items() if n in names}
 
 
-def _worker(method: str, tol: float, path: str) -> int:
+def _worker(method: str, tol: float, path: str, memory_limit: float | None) -> int:
     """Solves one case in this process and prints one JSON line."""
     z = np.load(path)
     V, T, b, bc = z["V"], z["T"], z["b"], z["bc"]
@@ -148,7 +150,9 @@ def _worker(method: str, tol: float, path: str) -> int:
     if method == "skinrs":
         from .. import bbw_dual_constrained, biharmonic_energy, biharmonic_matrix
 
-        W, info = bbw_dual_constrained(V, T, b, bc, tol=tol, return_info=True)
+        W, info = bbw_dual_constrained(
+            V, T, b, bc, tol=tol, memory_limit=memory_limit, return_info=True
+        )
         out = {k: info[k] for k in info if isinstance(info[k], (int, float, str, bool))}
     else:
         from .. import biharmonic_energy, biharmonic_matrix
@@ -168,8 +172,11 @@ def _worker(method: str, tol: float, path: str) -> int:
     return 0
 
 
-def _run(method: str, tol: float, path: Path, limit: float, mem_gb: float) -> dict[str, Any]:
+def _run(
+    method: str, tol: float, path: Path, limit: float, mem_gb: float, memory_limit_gb: float
+) -> dict[str, Any]:
     cmd = [sys.executable, "-m", "skinrs.bench.scale", "--worker", method, repr(tol), str(path)]
+    cmd += ["--memory-limit", repr(memory_limit_gb)] if memory_limit_gb else []
 
     def cap() -> None:
         lim = int(mem_gb * 2**30)
@@ -205,16 +212,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-paper", action="store_true", help="skip the paper's method")
     ap.add_argument("--limit", type=float, default=1800.0, help="skinrs time cap (s)")
     ap.add_argument("--mem-gb", type=float, default=12.0, help="address-space cap per solve (GB)")
+    ap.add_argument("--memory-limit", type=float, default=0.0,
+                    help="skinrs memory_limit (GB; default: bbw_dual_constrained's, half of RAM)")  # fmt: skip
     ap.add_argument("--data", help="folder holding armadillo.obj")
     ap.add_argument("--cache", default=str(Path.home() / ".cache" / "skinrs" / "scale"))
     args = ap.parse_args(argv)
     if args.worker:
         method, tol, path = args.worker
-        return _worker(method, float(tol), path)
+        return _worker(method, float(tol), path, args.memory_limit * 1e9 or None)
     paths = build_series(_data_dir(args.data), Path(args.cache), args.sizes)
     print("\n| size | n | tets | method | L-BFGS it. | rounds | factor B_ff s | L-BFGS s | "
-          "support factors s | CG s | smoother s | wall s | CPU s | peak RSS MB | energy |")  # fmt: skip
-    print("|---|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+          "support factors s | CG s | smoother s | wall s | CPU s | support factors MB | "
+          "peak RSS MB | energy | gap |")  # fmt: skip
+    print("|---|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     paper_on = not args.no_paper
     for name in [s[0] for s in SIZES if s[0] in paths]:
         z = np.load(paths[name])
@@ -223,7 +233,7 @@ def main(argv: list[str] | None = None) -> int:
         if paper_on:
             runs.append(("paper", args.paper_tol, args.paper_limit))
         for method, tol, limit in runs:
-            r = _run(method, tol, paths[name], limit, args.mem_gb)
+            r = _run(method, tol, paths[name], limit, args.mem_gb, args.memory_limit)
             label = f"{method} tol {tol:g}"
             if "failed" in r:
                 print(f"| {name} | {n} | {nt} | {label} | {r['failed']} |", flush=True)
@@ -231,13 +241,18 @@ def main(argv: list[str] | None = None) -> int:
                     paper_on = False
                 continue
             lb = r.get("time_lbfgs", r.get("time_solve"))
+            # Rounds, and whether L-BFGS finished the solve because the next round's support
+            # factors did not fit memory_limit.
+            rounds = _cell(r, "rounds", "d") + (", then L-BFGS" if r.get("memory_fallback") else "")
+            factor_mb = r["support_factor_bytes"] / 2**20 if "support_factor_bytes" in r else None
             print(
-                f"| {name} | {n} | {nt} | {label} | {r['iterations']} | "
-                f"{_cell(r, 'rounds', 'd')} | {r['time_factor']:.1f} | {lb:.1f} | "
+                f"| {name} | {n} | {nt} | {label} | {r['iterations']} | {rounds} | "
+                f"{r['time_factor']:.1f} | {lb:.1f} | "
                 f"{_cell(r, 'time_support_factor', '.1f')} | {_cell(r, 'time_cg', '.1f')} | "
-                f"{_cell(r, 'time_smooth', '.1f')} | "
-                f"{r['wall']:.1f} | {r['cpu']:.1f} | {r['peak_rss_mb']:.0f} | "
-                f"{r['energy_check']:.10g} |",
+                f"{_cell(r, 'time_smooth', '.1f')} | {r['wall']:.1f} | {r['cpu']:.1f} | "
+                f"{'-' if factor_mb is None else format(factor_mb, '.0f')} | "
+                f"{r['peak_rss_mb']:.0f} | {r['energy_check']:.10g} | "
+                f"{_cell(r, 'relative_gap', '.1e')} |",
                 flush=True,
             )
             if method == "paper" and r["wall"] > args.paper_limit:

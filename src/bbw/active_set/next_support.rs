@@ -25,6 +25,18 @@ impl SignThresholds {
     }
 }
 
+/// Which off-support neighbours a joining entry brings along ([`next_support`]).
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub(super) enum Dilate {
+    /// None: the joining entries alone.
+    Off,
+    /// The neighbours whose multiplier is below the joiner's violation and whose row would
+    /// join this column anyway (its most negative multiplier is in it).
+    WithinRows,
+    /// The neighbours whose multiplier is below the joiner's violation, in any row.
+    Wide,
+}
+
 /// The next support guess from a round's weights `w` and multipliers `y` (all `nf x m`):
 /// returns it with the numbers of sign violations: support entries below `leave_below` (not
 /// all of which leave) and off-support entries below `join_below` (at most one per row joins,
@@ -39,8 +51,10 @@ impl SignThresholds {
 ///   no farther, in steps of the graph of `A`, from the support's edge than from its
 ///   non-negative part), plus the most negative entry of each neighbourhood, which opens holes.
 /// - A support that falls short only sees negative multipliers right at its edge, so it grows by
-///   one neighbourhood per round. When `dilate` (the rounds crawl), the off-support neighbours
-///   of each joining entry whose multiplier is below the joiner's violation join too. Dilating
+///   one neighbourhood per round. When `dilate` is not [`Dilate::Off`] (the rounds crawl),
+///   the off-support neighbours of each joining entry whose multiplier is below the joiner's
+///   violation join too: with [`Dilate::WithinRows`] only those whose row's most negative
+///   multiplier is in this column (the next rule, which a wide dilation ignores). Dilating
 ///   every round makes some supports cycle, hence the switch.
 /// - A row joins one column per round: the one whose multiplier is most negative
 ///   ([`row_joiners`]).
@@ -50,7 +64,7 @@ pub(super) fn next_support(
     w: &[f64],
     y: &[f64],
     th: SignThresholds,
-    dilate: bool,
+    dilate: Dilate,
     nf: usize,
 ) -> (Vec<bool>, usize, usize) {
     let mut next = support.to_vec();
@@ -81,11 +95,13 @@ pub(super) fn next_support(
                         continue;
                     }
                     nx[i] = true;
-                    if dilate {
-                        for &j in a.symbolic().row_idx_of_col_raw(i) {
-                            if !sup[j] && yc[j] < -yc[i] {
-                                nx[j] = true;
-                            }
+                    if dilate == Dilate::Off {
+                        continue;
+                    }
+                    for &j in a.symbolic().row_idx_of_col_raw(i) {
+                        let row_agrees = dilate == Dilate::Wide || joiner[j] == col;
+                        if !sup[j] && yc[j] < -yc[i] && row_agrees {
+                            nx[j] = true;
                         }
                     }
                 }
@@ -104,8 +120,8 @@ pub(super) fn next_support(
 /// support is wrong, `mu_i` is off and `y_ij = (A w + g)_ij + mu_i` comes out negative in
 /// most of its columns at once, though only a few of them belong to the optimal support. The
 /// most negative one is the likeliest; joining them all overgrows the supports, and the next
-/// rounds peel them off again at the cost of a larger factor each. The neighbours a dilated
-/// join brings along ([`next_support`]) are not limited per row.
+/// rounds peel them off again at the cost of a larger factor each. The neighbours a wide
+/// dilation brings along ([`next_support`]) are not limited per row.
 fn row_joiners(support: &[bool], y: &[f64], join_below: f64, nf: usize) -> Vec<usize> {
     let m = support.len() / nf.max(1);
     (0..nf)
@@ -201,13 +217,17 @@ mod tests {
         y[11] = 0.5; // below the joiner's violation: joins too when dilating
         y[12] = 2.0;
         let th = SignThresholds::new(1e-6, 1.0);
-        let (next, negative, joined) = next_support(&a, &support, &w, &y, th, false, 14);
+        let (next, negative, joined) = next_support(&a, &support, &w, &y, th, Dilate::Off, 14);
         assert_eq!((negative, joined), (4, 1));
         let kept: Vec<usize> = (0..14).filter(|&i| next[i]).collect();
         // 8 and 9 are no farther from the edge than from the positive part; 6 and 7 stay.
         assert_eq!(kept, vec![0, 1, 2, 3, 4, 5, 6, 7, 10]);
-        let (next, _, _) = next_support(&a, &support, &w, &y, th, true, 14);
+        let (next, _, _) = next_support(&a, &support, &w, &y, th, Dilate::Wide, 14);
         assert!(next[10] && next[11] && !next[12]);
+        // Row 11 has no negative multiplier, so no column of its own to join: only a wide
+        // dilation brings it along.
+        let (next, _, _) = next_support(&a, &support, &w, &y, th, Dilate::WithinRows, 14);
+        assert!(next[10] && !next[11] && !next[12]);
     }
 
     #[test]
@@ -224,7 +244,7 @@ mod tests {
             row_joiners(&support, &y, th.join_below, 4),
             vec![none, 0, 1, none]
         );
-        let (next, negative, joined) = next_support(&a, &support, &w, &y, th, false, 4);
+        let (next, negative, joined) = next_support(&a, &support, &w, &y, th, Dilate::Off, 4);
         // Every violation counts (the KKT test), but each row takes one column.
         assert_eq!((negative, joined), (0, 4));
         assert_eq!(
