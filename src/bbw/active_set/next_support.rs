@@ -37,10 +37,29 @@ pub(super) enum Dilate {
     Wide,
 }
 
-/// The next support guess from a round's weights `w` and multipliers `y` (all `nf x m`):
-/// returns it with the numbers of sign violations: support entries below `leave_below` (not
-/// all of which leave) and off-support entries below `join_below` (at most one per row joins,
-/// below).
+/// A round's next support guess ([`next_support`]).
+pub(super) struct NextSupport {
+    /// The support after the sign rules, without dilation (`support[j * nf + i]`).
+    pub plain: Vec<bool>,
+    /// The entries (`j * nf + i`) that dilation adds to `plain`; empty without dilation.
+    pub dilated: Vec<usize>,
+    /// Sign violations: support entries below `leave_below` (not all of which leave) and
+    /// off-support entries below `join_below` (at most one per row joins).
+    pub negative: usize,
+    pub joined: usize,
+}
+
+impl NextSupport {
+    /// `plain` with the dilated entries.
+    pub fn into_dilated(self) -> Vec<bool> {
+        let mut next = self.plain;
+        self.dilated.iter().for_each(|&k| next[k] = true);
+        next
+    }
+}
+
+/// The next support guess from a round's weights `w` and multipliers `y` (all `nf x m`), with
+/// and without dilation in one pass (a round that dilates may be undone, below).
 ///
 /// Two rules keep the supports' edges from crawling, as plain primal-dual active sets do on
 /// the biharmonic operator (not an M-matrix), and a third keeps the supports from
@@ -66,10 +85,10 @@ pub(super) fn next_support(
     th: SignThresholds,
     dilate: Dilate,
     nf: usize,
-) -> (Vec<bool>, usize, usize) {
+) -> NextSupport {
     let mut next = support.to_vec();
     let joiner = row_joiners(support, y, th.join_below, nf);
-    let counts: Vec<(usize, usize)> = next
+    let per_column: Vec<(usize, usize, Vec<usize>)> = next
         .par_chunks_mut(nf)
         .zip(support.par_chunks(nf))
         .zip(w.par_chunks(nf).zip(y.par_chunks(nf)))
@@ -80,7 +99,7 @@ pub(super) fn next_support(
             let band: Vec<usize> = (0..nf).filter(|&i| leaving(i)).collect();
             let d_edge = band_distance(a, &band, leaving, |i| !sup[i], nf);
             let d_kept = band_distance(a, &band, leaving, |i| sup[i] && !leaving(i), nf);
-            let (mut negative, mut joined) = (0, 0);
+            let (mut negative, mut joined, mut dilated) = (0, 0, Vec::new());
             for i in 0..nf {
                 if leaving(i) {
                     negative += 1;
@@ -101,16 +120,26 @@ pub(super) fn next_support(
                     for &j in a.symbolic().row_idx_of_col_raw(i) {
                         let row_agrees = dilate == Dilate::Wide || joiner[j] == col;
                         if !sup[j] && yc[j] < -yc[i] && row_agrees {
-                            nx[j] = true;
+                            dilated.push(col * nf + j);
                         }
                     }
                 }
             }
-            (negative, joined)
+            (negative, joined, dilated)
         })
         .collect();
-    let (n_w, n_y) = counts.iter().fold((0, 0), |(a, b), &(l, j)| (a + l, b + j));
-    (next, n_w, n_y)
+    let mut step = NextSupport {
+        plain: next,
+        dilated: Vec::new(),
+        negative: 0,
+        joined: 0,
+    };
+    for (negative, joined, dilated) in per_column {
+        step.negative += negative;
+        step.joined += joined;
+        step.dilated.extend(dilated);
+    }
+    step
 }
 
 /// For each row, the off-support column whose multiplier is most negative below `join_below`
@@ -217,16 +246,19 @@ mod tests {
         y[11] = 0.5; // below the joiner's violation: joins too when dilating
         y[12] = 2.0;
         let th = SignThresholds::new(1e-6, 1.0);
-        let (next, negative, joined) = next_support(&a, &support, &w, &y, th, Dilate::Off, 14);
-        assert_eq!((negative, joined), (4, 1));
-        let kept: Vec<usize> = (0..14).filter(|&i| next[i]).collect();
+        let step = next_support(&a, &support, &w, &y, th, Dilate::Off, 14);
+        assert_eq!((step.negative, step.joined), (4, 1));
+        let kept: Vec<usize> = (0..14).filter(|&i| step.plain[i]).collect();
         // 8 and 9 are no farther from the edge than from the positive part; 6 and 7 stay.
         assert_eq!(kept, vec![0, 1, 2, 3, 4, 5, 6, 7, 10]);
-        let (next, _, _) = next_support(&a, &support, &w, &y, th, Dilate::Wide, 14);
+        let step = next_support(&a, &support, &w, &y, th, Dilate::Wide, 14);
+        // The plain support is the one without dilation.
+        assert!(step.plain[10] && !step.plain[11]);
+        let next = step.into_dilated();
         assert!(next[10] && next[11] && !next[12]);
         // Row 11 has no negative multiplier, so no column of its own to join: only a wide
         // dilation brings it along.
-        let (next, _, _) = next_support(&a, &support, &w, &y, th, Dilate::WithinRows, 14);
+        let next = next_support(&a, &support, &w, &y, th, Dilate::WithinRows, 14).into_dilated();
         assert!(next[10] && !next[11] && !next[12]);
     }
 
@@ -244,11 +276,11 @@ mod tests {
             row_joiners(&support, &y, th.join_below, 4),
             vec![none, 0, 1, none]
         );
-        let (next, negative, joined) = next_support(&a, &support, &w, &y, th, Dilate::Off, 4);
+        let step = next_support(&a, &support, &w, &y, th, Dilate::Off, 4);
         // Every violation counts (the KKT test), but each row takes one column.
-        assert_eq!((negative, joined), (0, 4));
+        assert_eq!((step.negative, step.joined), (0, 4));
         assert_eq!(
-            next,
+            step.plain,
             vec![true, true, false, false, false, false, true, true]
         );
     }

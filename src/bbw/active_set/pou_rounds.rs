@@ -298,13 +298,11 @@ pub(super) fn pou_rounds(
         dilation.last_gap = own_gap;
         dilation.last_upper = upper;
         let thresholds = SignThresholds::new(opts.tol, scale);
-        let (next, n_w, n_y) = next_support(&prob.a, support, &w, &y, thresholds, dilate, nf);
-        let next = with_smoother(next);
-        undilated = crawls.then(|| {
-            let (plain, _, _) = next_support(&prob.a, support, &w, &y, thresholds, Dilate::Off, nf);
-            (with_smoother(plain), mu.clone())
-        });
-        let exact = n_w == 0 && n_y == 0;
+        let step = next_support(&prob.a, support, &w, &y, thresholds, dilate, nf);
+        let exact = step.negative == 0 && step.joined == 0;
+        let plain = crawls.then(|| step.plain.clone());
+        let next = with_smoother(step.into_dilated());
+        undilated = plain.map(|plain| (with_smoother(plain), mu.clone()));
         if exact && *cg_tol <= CG_TOL_FINAL * opts.tol {
             // Every KKT sign holds and PoU to round-off: this is the optimum; the gap is as
             // small as floating point allows.
