@@ -25,11 +25,12 @@
 //! that stay.
 //!
 //! The first support comes from a short run of the paper's L-BFGS on the dual (a duality gap of
-//! [`WARM_GAP`]). Every round is certified like the L-BFGS iterates: the projected weights give
-//! an upper bound on the optimal energy, the dual (eq. 12) at `y` made non-negative by
-//! [`spread::spread_negative`] a lower bound, and the solve stops once their relative gap is
-//! below `tol`. Without partition of unity (App. A) the columns decouple and each one is a
-//! box-constrained QP solved the same way with two bounds and no `mu` ([`box_rounds`]).
+//! [`WARM_GAP`]), its projected weights smoothed as a round's are. Every round is certified
+//! like the L-BFGS iterates: the projected weights give an upper bound on the optimal energy,
+//! the dual (eq. 12) at `y` made non-negative by [`spread::spread_negative`] a lower bound, and
+//! the solve stops once their relative gap is below `tol`. Without partition of unity (App. A)
+//! the columns decouple and each one is a box-constrained QP solved the same way with two
+//! bounds and no `mu` ([`box_rounds`]).
 //! Primal-dual active sets are not guaranteed to converge when `A` is not an M-matrix (the
 //! biharmonic one is not): if the gap stalls ([`stall`]), L-BFGS warm-started from the last
 //! multipliers runs for at most [`INTERMISSION`] iterations, then the rounds resume until
@@ -56,8 +57,8 @@ use super::squared_lbfgs::{random_start, run_lbfgs};
 use crate::error::SkinResult;
 use crate::progress::Progress;
 
-/// Relative duality gap at which the L-BFGS warm start stops; its projected weights above this
-/// value (and each row's largest) form the first support.
+/// Relative duality gap at which the L-BFGS warm start stops; its projected weights, after the
+/// smoother's sweeps, above this value (and each row's largest) form the first support.
 pub const WARM_GAP: f64 = 3e-3;
 /// L-BFGS iterations of the first fallback before the rounds resume.
 const INTERMISSION: usize = 150;
@@ -100,7 +101,9 @@ fn solve_with_stall(
         info.time_active_set = t.elapsed().as_secs_f64();
         return hand_over(prob, opts, outcome, u_warm, best, info, progress);
     }
-    let mut state = RoundsState::from_warm_start(&w, WARM_GAP, nf, m);
+    let sweeps = Instant::now();
+    let mut state = RoundsState::from_warm_start(prob, &w, WARM_GAP);
+    info.time_smooth += sweeps.elapsed().as_secs_f64();
     let watch = Watch::Gap(stall_rounds);
     let mut outcome = pou_rounds(prob, opts, &mut state, watch, best, info, progress)?;
     info.time_active_set = t.elapsed().as_secs_f64();

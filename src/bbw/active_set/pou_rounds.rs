@@ -62,14 +62,16 @@ fn smoothed_support(smoothed: &[f64], support: &[bool], rules: &[bool], above: f
 
 /// The rounds' state, kept across an L-BFGS intermission: the support guess
 /// (`support[j * nf + i]`), the partition-of-unity multiplier, the CG tolerance and what
-/// decides the dilation of joins ([`next_support`]), and whether the next support follows the
-/// smoother ([`smoothed_support`]): how many rounds' gaps have not fallen.
+/// decides the dilation of joins ([`next_support`]), whether the next support follows the
+/// smoother ([`smoothed_support`]): how many rounds' gaps have not fallen, and the smoother's
+/// colouring of `A`.
 pub(super) struct RoundsState {
     support: Vec<bool>,
     mu: Vec<f64>,
     cg_tol: f64,
     dilation: Dilation,
     smoother_rises: usize,
+    colouring: Colouring,
 }
 
 /// The last round's own bounds, whether its joins were dilated, and the pause of dilation: none
@@ -84,9 +86,14 @@ struct Dilation {
 }
 
 impl RoundsState {
-    /// The first support from the warm start's projected weights `w`: the entries above
-    /// `first_above` and each row's largest.
-    pub fn from_warm_start(w: &[f64], first_above: f64, nf: usize, m: usize) -> Self {
+    /// The first support from the warm start's projected weights `w`, smoothed as a round's
+    /// are: the entries above `first_above` and each row's largest.
+    pub fn from_warm_start(prob: &EliminatedProblem, w: &[f64], first_above: f64) -> Self {
+        let (nf, m) = (prob.nf(), prob.m);
+        // The smoother settles the zero set near the supports' edges here as it does after
+        // each round (rounds at tol 1e-9 in docs/solver.md's WARM_GAP row).
+        let colouring = Colouring::new(&prob.a);
+        let w = gauss_seidel_pou(&prob.a, &colouring, &prob.g, w, nf, m, SMOOTH_SWEEPS);
         // The warm start is only accurate to its gap: weights below it are mostly the smooth
         // tails of W(Y) (eq. 15) over regions that are zero at the optimum, and leaving them
         // out of the first support saves rounds.
@@ -110,6 +117,7 @@ impl RoundsState {
                 last_upper: f64::INFINITY,
             },
             smoother_rises: 0,
+            colouring,
         }
     }
 }
@@ -133,9 +141,6 @@ pub(super) fn pou_rounds(
     let mut undilated: Option<(Vec<bool>, Vec<f64>)> = None;
     // The last round's dual point, for L-BFGS when the next round's factors do not fit.
     let mut last_dual: Option<Vec<f64>> = None;
-    // Built when the smoother first runs in this call; the rounds resumed after an L-BFGS
-    // intermission may not run it at all.
-    let mut colouring: Option<Colouring> = None;
     for _ in 0..budget {
         let RoundsState {
             support,
@@ -143,6 +148,7 @@ pub(super) fn pou_rounds(
             cg_tol,
             dilation,
             smoother_rises,
+            colouring,
         } = &mut *state;
         let Some(factors) = factor_within_limit(prob, opts, support, info)? else {
             return Ok(Outcome::OverBudget(last_dual));
@@ -213,15 +219,7 @@ pub(super) fn pou_rounds(
         let upper = prob.energy(&feasible);
         let t = Instant::now();
         let smoothed = (*smoother_rises < SMOOTHER_RISES).then(|| {
-            gauss_seidel_pou(
-                &prob.a,
-                colouring.get_or_insert_with(|| Colouring::new(&prob.a)),
-                &prob.g,
-                &feasible,
-                nf,
-                m,
-                SMOOTH_SWEEPS,
-            )
+            gauss_seidel_pou(&prob.a, colouring, &prob.g, &feasible, nf, m, SMOOTH_SWEEPS)
         });
         info.time_smooth += t.elapsed().as_secs_f64();
         best.offer(&w, feasible, upper);
