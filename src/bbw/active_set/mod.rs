@@ -25,12 +25,12 @@
 //! that stay.
 //!
 //! The first support comes from a short run of the paper's L-BFGS on the dual (a duality gap of
-//! [`WARM_GAP`]), its projected weights smoothed as a round's are. Every round is certified
-//! like the L-BFGS iterates: the projected weights give an upper bound on the optimal energy,
-//! the dual (eq. 12) at `y` made non-negative by [`spread::spread_negative`] a lower bound, and
-//! the solve stops once their relative gap is below `tol`. Without partition of unity (App. A)
-//! the columns decouple and each one is a box-constrained QP solved the same way with two
-//! bounds and no `mu` ([`box_rounds`]).
+//! [`WARM_GAP`]), its projected weights smoothed as a round's are (with fewer sweeps). Every
+//! round is certified like the L-BFGS iterates: the projected weights give an upper bound on
+//! the optimal energy, the dual (eq. 12) at `y` made non-negative by
+//! [`spread::spread_negative`] a lower bound, and the solve stops once their relative gap is
+//! below `tol`. Without partition of unity (App. A) the columns decouple and each one is a
+//! box-constrained QP solved the same way with two bounds and no `mu` ([`box_rounds`]).
 //! Primal-dual active sets are not guaranteed to converge when `A` is not an M-matrix (the
 //! biharmonic one is not): if the gap stalls ([`stall`]), L-BFGS warm-started from the last
 //! multipliers runs for at most [`INTERMISSION`] iterations, then the rounds resume until

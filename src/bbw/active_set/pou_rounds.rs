@@ -39,8 +39,14 @@ const CRAWL: f64 = 4.0;
 /// each further such round.
 const DILATION_PAUSE: usize = 3;
 
-/// Projected Gauss-Seidel sweeps over a round's projected weights ([`gauss_seidel_pou`]).
-const SMOOTH_SWEEPS: usize = 10;
+/// Projected Gauss-Seidel sweeps over a round's projected weights ([`gauss_seidel_pou`]):
+/// each sweep moves the supports' edges by about a ring of `A`, and a round's exact solve
+/// costs far more than a sweep, the more so the larger the mesh (rounds at 10, 20, 30 and 50
+/// sweeps in docs/solver.md's smoother row).
+const SMOOTH_SWEEPS: usize = 30;
+/// Sweeps over the warm start's projected weights before the first support is read off them:
+/// 30 took as many rounds as 10 (docs/solver.md's WARM_GAP row).
+const FIRST_SWEEPS: usize = 10;
 /// The rounds run the smoother and follow its support until this many rounds' own gaps did
 /// not fall; after that its upper bound saved no round (hand-403, big2d, the tubes of `bench
 /// bbw`, the armadillos of `bench scale`).
@@ -86,14 +92,14 @@ struct Dilation {
 }
 
 impl RoundsState {
-    /// The first support from the warm start's projected weights `w`, smoothed as a round's
-    /// are: the entries above `first_above` and each row's largest.
+    /// The first support from the warm start's projected weights `w` after [`FIRST_SWEEPS`]
+    /// of the rounds' smoother: the entries above `first_above` and each row's largest.
     pub fn from_warm_start(prob: &EliminatedProblem, w: &[f64], first_above: f64) -> Self {
         let (nf, m) = (prob.nf(), prob.m);
         // The smoother settles the zero set near the supports' edges here as it does after
         // each round (rounds at tol 1e-9 in docs/solver.md's WARM_GAP row).
         let colouring = Colouring::new(&prob.a);
-        let w = gauss_seidel_pou(&prob.a, &colouring, &prob.g, w, nf, m, SMOOTH_SWEEPS);
+        let w = gauss_seidel_pou(&prob.a, &colouring, &prob.g, w, nf, m, FIRST_SWEEPS);
         // The warm start is only accurate to its gap: weights below it are mostly the smooth
         // tails of W(Y) (eq. 15) over regions that are zero at the optimum, and leaving them
         // out of the first support saves rounds.
