@@ -345,8 +345,8 @@ def test_certificate_is_exact_next_to_a_sliver():
 def test_max_iter_warns_and_still_returns_feasible_weights():
     V, T = grid(25)
     # Three handles: the unconstrained biharmonic weights go negative, so three iterations
-    # cannot certify the gap (with two corner handles they are the exact optimum at once; on a
-    # 12 x 12 grid the rounds' smoother nearly solves the problem by itself).
+    # cannot certify the gap (with two corner handles they are the exact optimum at once, and a
+    # 12 x 12 grid is certified within three).
     with pytest.warns(RuntimeWarning, match="duality gap"):
         W = skinrs.bbw_dual_constrained(V, T, [0, 624, 312], np.eye(3), tol=1e-14, max_iter=3)
     assert W.min() >= 0
