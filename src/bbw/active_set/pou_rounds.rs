@@ -10,7 +10,7 @@ use rayon::prelude::*;
 
 use super::next_support::{next_support, Dilate, SignThresholds};
 use super::pcg::{pcg, row_sums_minus_one};
-use super::smooth::{gauss_seidel_pou, Colouring};
+use super::smooth::{gauss_seidel_pou, SweepPlan};
 use super::spread::spread_negative;
 use super::stall::{Outcome, OwnBounds, StallWatch, Watch, MAX_ROUNDS};
 use super::support_factor::{factor_within_limit, longest_first};
@@ -70,14 +70,14 @@ fn smoothed_support(smoothed: &[f64], support: &[bool], rules: &[bool], above: f
 /// (`support[j * nf + i]`), the partition-of-unity multiplier, the CG tolerance and what
 /// decides the dilation of joins ([`next_support`]), whether the next support follows the
 /// smoother ([`smoothed_support`]): how many rounds' gaps have not fallen, and the smoother's
-/// colouring of `A`.
+/// plan of `A`'s rows.
 pub(super) struct RoundsState {
     support: Vec<bool>,
     mu: Vec<f64>,
     cg_tol: f64,
     dilation: Dilation,
     smoother_rises: usize,
-    colouring: Colouring,
+    sweep_plan: SweepPlan,
 }
 
 /// The last round's own bounds, whether its joins were dilated, and the pause of dilation: none
@@ -98,8 +98,8 @@ impl RoundsState {
         let (nf, m) = (prob.nf(), prob.m);
         // The smoother settles the zero set near the supports' edges here as it does after
         // each round (rounds at tol 1e-9 in docs/solver.md's WARM_GAP row).
-        let colouring = Colouring::new(&prob.a);
-        let w = gauss_seidel_pou(&prob.a, &colouring, &prob.g, w, nf, m, FIRST_SWEEPS);
+        let sweep_plan = SweepPlan::new(&prob.a);
+        let w = gauss_seidel_pou(&sweep_plan, &prob.g, w, nf, m, FIRST_SWEEPS);
         // The warm start is only accurate to its gap: weights below it are mostly the smooth
         // tails of W(Y) (eq. 15) over regions that are zero at the optimum, and leaving them
         // out of the first support saves rounds.
@@ -123,7 +123,7 @@ impl RoundsState {
                 last_upper: f64::INFINITY,
             },
             smoother_rises: 0,
-            colouring,
+            sweep_plan,
         }
     }
 }
@@ -154,7 +154,7 @@ pub(super) fn pou_rounds(
             cg_tol,
             dilation,
             smoother_rises,
-            colouring,
+            sweep_plan,
         } = &mut *state;
         let Some(factors) = factor_within_limit(prob, opts, support, info)? else {
             return Ok(Outcome::OverBudget(last_dual));
@@ -224,9 +224,8 @@ pub(super) fn pou_rounds(
         let feasible = project_pou(&w, nf, m);
         let upper = prob.energy(&feasible);
         let t = Instant::now();
-        let smoothed = (*smoother_rises < SMOOTHER_RISES).then(|| {
-            gauss_seidel_pou(&prob.a, colouring, &prob.g, &feasible, nf, m, SMOOTH_SWEEPS)
-        });
+        let smoothed = (*smoother_rises < SMOOTHER_RISES)
+            .then(|| gauss_seidel_pou(sweep_plan, &prob.g, &feasible, nf, m, SMOOTH_SWEEPS));
         info.time_smooth += t.elapsed().as_secs_f64();
         best.offer(&w, feasible, upper);
         if let Some(smoothed) = &smoothed {

@@ -11,52 +11,161 @@
 //! nonsmooth Newton multigrid (Graeser & Kornhuber 2009) it settles the zero set locally,
 //! where a round's exact solve on a support guess corrects it globally.
 //!
-//! The rows are swept colour by colour ([`Colouring`]): rows of one colour are not coupled by
-//! `A`, so their updates are independent and run in parallel, and the sweep is still
-//! Gauss-Seidel (in the order of the colours), with the same result on any number of threads.
+//! The rows are swept block by block ([`SweepPlan`]): `A`'s rows are renumbered in
+//! breadth-first order, cut into runs of consecutive rows, and the runs coloured so that no two
+//! of one colour are coupled by `A`. Runs of one colour are swept in parallel, each in its own
+//! row order, so the sweep is still Gauss-Seidel and gives the same result on any number of
+//! threads. Breadth-first order keeps a row's neighbours near it in memory: colouring single
+//! rows instead scatters each colour over the whole mesh, and its two threads then swept
+//! hand-403 no faster than one thread in row order, the 85k armadillo 1.3x faster
+//! (docs/solver.md's smoother row).
+
+use std::ops::Range;
 
 use rayon::prelude::*;
 
 use crate::sparse::Csc;
 
-/// A partition of `A`'s rows into classes of rows no two of which are coupled (`a_ik = 0`):
-/// greedy colouring in row order, each row taking the smallest colour none of its neighbours
-/// holds.
-pub(super) struct Colouring {
-    classes: Vec<Vec<usize>>,
+/// Rows per run of [`SweepPlan`]. Longer runs sweep a little faster, but each pass along one
+/// propagates further in one direction: runs of 256 rows took the 7.7k armadillo of `bench
+/// scale` 11 rounds against 7 (seeds 0-2, tol 1e-9), runs of 16-64 rows 7 (seed 0), as single
+/// rows do.
+const RUN_ROWS: usize = 64;
+
+/// How the sweeps visit `A`'s rows (see the module docs): `A` renumbered in breadth-first
+/// order (`order[p]` is the row at position `p`), its off-diagonal entries by row and its
+/// diagonal, and runs of [`RUN_ROWS`] consecutive positions grouped by colour.
+pub(super) struct SweepPlan {
+    order: Vec<usize>,
+    starts: Vec<usize>,
+    /// Where a row's entries in its own run begin: its entries in other runs come first, so
+    /// that a run's sweep reads each from its own buffer or the shared one without a branch.
+    own_from: Vec<usize>,
+    cols: Vec<u32>,
+    vals: Vec<f64>,
+    diag: Vec<f64>,
+    colours: Vec<Vec<Range<usize>>>,
 }
 
-impl Colouring {
+impl SweepPlan {
     pub fn new(a: &Csc) -> Self {
         let n = a.nrows();
-        let mut colour = vec![usize::MAX; n];
-        // taken[c] == i: a neighbour of row i holds colour c.
-        let mut taken: Vec<usize> = Vec::new();
-        let mut classes: Vec<Vec<usize>> = Vec::new();
-        for i in 0..n {
-            for &k in a.symbolic().row_idx_of_col_raw(i) {
-                if colour[k] != usize::MAX {
-                    taken[colour[k]] = i;
+        let order = breadth_first_order(a);
+        let mut position = vec![0usize; n];
+        for (p, &i) in order.iter().enumerate() {
+            position[i] = p;
+        }
+        let (mut starts, mut own_from) = (vec![0], Vec::with_capacity(n));
+        let (mut cols, mut vals) = (Vec::new(), Vec::new());
+        let mut diag = vec![0.0; n];
+        let mut own = Vec::new();
+        for (p, &i) in order.iter().enumerate() {
+            let nbrs = a.symbolic().row_idx_of_col_raw(i);
+            own.clear();
+            for (&k, &v) in nbrs.iter().zip(a.val_of_col(i)) {
+                // Positions fit u32: a mesh of 4G vertices would not fit in memory anyway.
+                let q = position[k] as u32;
+                if k == i {
+                    diag[p] += v;
+                } else if position[k] / RUN_ROWS == p / RUN_ROWS {
+                    own.push((q, v));
+                } else {
+                    cols.push(q);
+                    vals.push(v);
                 }
             }
-            let c = (0..classes.len())
-                .find(|&c| taken[c] != i)
-                .unwrap_or(classes.len());
-            if c == classes.len() {
-                classes.push(Vec::new());
-                taken.push(usize::MAX);
-            }
-            colour[i] = c;
-            classes[c].push(i);
+            own_from.push(cols.len());
+            cols.extend(own.iter().map(|e| e.0));
+            vals.extend(own.iter().map(|e| e.1));
+            starts.push(cols.len());
         }
-        Colouring { classes }
+        let runs: Vec<Range<usize>> = (0..n)
+            .step_by(RUN_ROWS)
+            .map(|s| s..(s + RUN_ROWS).min(n))
+            .collect();
+        let colours = colour_runs(runs, &starts, &cols);
+        SweepPlan {
+            order,
+            starts,
+            own_from,
+            cols,
+            vals,
+            diag,
+            colours,
+        }
     }
 }
 
-/// `sweeps` Gauss-Seidel sweeps over the rows of `w`, colour by colour (see the module docs).
+/// `A`'s rows in breadth-first order, each connected component from the last row reached by
+/// a search from its first row (a far row, so that the search's levels are narrow).
+fn breadth_first_order(a: &Csc) -> Vec<usize> {
+    let n = a.nrows();
+    let mut seen = vec![false; n];
+    let mut order = Vec::with_capacity(n);
+    let mut scratch = vec![false; n];
+    for root in 0..n {
+        if seen[root] {
+            continue;
+        }
+        let far = *breadth_first(a, root, &mut scratch).last().unwrap_or(&root);
+        order.extend(breadth_first(a, far, &mut seen));
+    }
+    order
+}
+
+/// The rows reached from `root` in breadth-first order, marking them in `seen`.
+fn breadth_first(a: &Csc, root: usize, seen: &mut [bool]) -> Vec<usize> {
+    let mut queue = vec![root];
+    seen[root] = true;
+    let mut head = 0;
+    while head < queue.len() {
+        let i = queue[head];
+        head += 1;
+        for &k in a.symbolic().row_idx_of_col_raw(i) {
+            if !seen[k] {
+                seen[k] = true;
+                queue.push(k);
+            }
+        }
+    }
+    queue
+}
+
+/// Greedy colouring of `runs` (in order): each run takes the smallest colour that no run
+/// coupled to it by an entry (`starts`, `cols`) holds.
+fn colour_runs(runs: Vec<Range<usize>>, starts: &[usize], cols: &[u32]) -> Vec<Vec<Range<usize>>> {
+    let n = starts.len() - 1;
+    let mut run_of = vec![0usize; n];
+    for (r, run) in runs.iter().enumerate() {
+        run_of[run.clone()].iter_mut().for_each(|x| *x = r);
+    }
+    let mut colour = vec![usize::MAX; runs.len()];
+    // taken[c] == r: a run coupled to run r holds colour c.
+    let mut taken: Vec<usize> = Vec::new();
+    let mut colours: Vec<Vec<Range<usize>>> = Vec::new();
+    for (r, run) in runs.into_iter().enumerate() {
+        for &k in &cols[starts[run.start]..starts[run.end]] {
+            let c = colour[run_of[k as usize]];
+            if c != usize::MAX {
+                taken[c] = r;
+            }
+        }
+        let c = (0..colours.len())
+            .find(|&c| taken[c] != r)
+            .unwrap_or(colours.len());
+        if c == colours.len() {
+            colours.push(Vec::new());
+            taken.push(usize::MAX);
+        }
+        colour[r] = c;
+        colours[c].push(run);
+    }
+    colours
+}
+
+/// `sweeps` Gauss-Seidel sweeps over the rows of `w`, run by run (see the module docs).
 pub(super) fn gauss_seidel_pou(
-    a: &Csc,
-    colouring: &Colouring,
+    plan: &SweepPlan,
     g: &[f64],
     w: &[f64],
     nf: usize,
@@ -66,34 +175,42 @@ pub(super) fn gauss_seidel_pou(
     if m == 0 || nf == 0 {
         return w.to_vec();
     }
-    // Row-major, so that a row's update reads its neighbours' rows and its own row of G
-    // contiguously.
-    let mut rows = row_major(w, nf, m);
-    let g = row_major(g, nf, m);
-    let mut updates = Vec::new();
+    // Row-major in the plan's order, so that a row's update reads its neighbours' rows and its
+    // own row of G contiguously and nearby.
+    let mut rows = gather_rows(w, &plan.order, m);
+    let g = gather_rows(g, &plan.order, m);
+    // One buffer per run, reused by every sweep.
+    let mut bufs: Vec<Vec<Vec<f64>>> = plan
+        .colours
+        .iter()
+        .map(|c| c.iter().map(|run| vec![0.0; run.len() * m]).collect())
+        .collect();
     for _ in 0..sweeps {
-        for class in &colouring.classes {
-            updates.resize(class.len() * m, 0.0);
-            updates
-                .par_chunks_mut(m)
-                .zip(class.par_iter())
-                .for_each_init(Vec::new, |scratch, (target, &i)| {
-                    row_update(a, &g[i * m..(i + 1) * m], &rows, i, target, scratch);
-                });
-            for (&i, target) in class.iter().zip(updates.chunks(m)) {
-                rows[i * m..(i + 1) * m].copy_from_slice(target);
+        for (colour, bufs) in plan.colours.iter().zip(&mut bufs) {
+            colour
+                .par_iter()
+                .zip(bufs.par_iter_mut())
+                .for_each(|(run, own)| sweep_run(plan, &g, &rows, run.clone(), m, own));
+            for (run, own) in colour.iter().zip(bufs.iter()) {
+                rows[run.start * m..run.end * m].copy_from_slice(own);
             }
         }
     }
-    // Back to column-major: `rows` is the column-major storage of the `m x nf` transpose.
-    row_major(&rows, m, nf)
+    // Back to column-major in the original row order.
+    let mut out = vec![0.0; nf * m];
+    for (p, &i) in plan.order.iter().enumerate() {
+        for j in 0..m {
+            out[j * nf + i] = rows[p * m + j];
+        }
+    }
+    out
 }
 
-/// The column-major `nrows x ncols` matrix `x` stored row by row (which is the column-major
-/// storage of its transpose).
-fn row_major(x: &[f64], nrows: usize, ncols: usize) -> Vec<f64> {
-    let mut rows = vec![0.0; nrows * ncols];
-    rows.par_chunks_mut(ncols).enumerate().for_each(|(i, r)| {
+/// Row `order[p]` of the column-major `nrows x m` matrix `x` at `p * m..(p + 1) * m`.
+fn gather_rows(x: &[f64], order: &[usize], m: usize) -> Vec<f64> {
+    let nrows = order.len();
+    let mut rows = vec![0.0; nrows * m];
+    rows.par_chunks_mut(m).zip(order).for_each(|(r, &i)| {
         r.iter_mut()
             .enumerate()
             .for_each(|(j, v)| *v = x[j * nrows + i]);
@@ -101,34 +218,40 @@ fn row_major(x: &[f64], nrows: usize, ncols: usize) -> Vec<f64> {
     rows
 }
 
-/// Row `i`'s minimiser with the other rows of `rows` fixed, into `target`, given its row
-/// `g_i` of `G`; row `i` itself when `a_ii` is not positive.
-fn row_update(
-    a: &Csc,
-    g_i: &[f64],
+/// Into `own`: the rows `run` of `rows` after one Gauss-Seidel pass over them in order, the
+/// other rows held at `rows`: each row the simplex projection of `-(g_p + sum_{k != p} a_pk w_k) / a_pp`,
+/// or kept when `a_pp` is not positive.
+fn sweep_run(
+    plan: &SweepPlan,
+    g: &[f64],
     rows: &[f64],
-    i: usize,
-    target: &mut [f64],
-    scratch: &mut Vec<f64>,
+    run: Range<usize>,
+    m: usize,
+    own: &mut [f64],
 ) {
-    let m = target.len();
-    target.copy_from_slice(g_i);
-    let mut diag = 0.0;
-    let nbrs = a.symbolic().row_idx_of_col_raw(i);
-    for (&k, &v) in nbrs.iter().zip(a.val_of_col(i)) {
-        if k == i {
-            diag = v;
+    own.copy_from_slice(&rows[run.start * m..run.end * m]);
+    let mut target = vec![0.0; m];
+    let mut scratch = Vec::with_capacity(m);
+    for p in run.clone() {
+        let diag = plan.diag[p];
+        if diag <= 0.0 {
             continue;
         }
-        let wk = &rows[k * m..(k + 1) * m];
-        target.iter_mut().zip(wk).for_each(|(t, x)| *t += v * x);
+        target.copy_from_slice(&g[p * m..(p + 1) * m]);
+        let (start, split, end) = (plan.starts[p], plan.own_from[p], plan.starts[p + 1]);
+        for (&k, &v) in plan.cols[start..split].iter().zip(&plan.vals[start..split]) {
+            let wk = &rows[k as usize * m..(k as usize + 1) * m];
+            target.iter_mut().zip(wk).for_each(|(t, x)| *t += v * x);
+        }
+        for (&k, &v) in plan.cols[split..end].iter().zip(&plan.vals[split..end]) {
+            let k = k as usize - run.start;
+            let wk = &own[k * m..(k + 1) * m];
+            target.iter_mut().zip(wk).for_each(|(t, x)| *t += v * x);
+        }
+        target.iter_mut().for_each(|t| *t /= -diag);
+        project_simplex(&mut target, &mut scratch);
+        own[(p - run.start) * m..(p - run.start + 1) * m].copy_from_slice(&target);
     }
-    if diag <= 0.0 {
-        target.copy_from_slice(&rows[i * m..(i + 1) * m]);
-        return;
-    }
-    target.iter_mut().for_each(|t| *t /= -diag);
-    project_simplex(target, scratch);
 }
 
 /// Euclidean projection of `u` onto the simplex `{x >= 0, sum x = 1}`, in place: `x = max(u -
@@ -213,24 +336,46 @@ mod tests {
     }
 
     #[test]
-    fn colours_cover_every_row_once_and_never_couple_two() {
-        let a = crate::sparse::path_matrix(9);
-        let classes = Colouring::new(&a).classes;
-        // A path's rows alternate between two colours.
-        assert_eq!(classes, vec![vec![0, 2, 4, 6, 8], vec![1, 3, 5, 7]]);
-        let a = nine_point_grid(7);
-        let classes = Colouring::new(&a).classes;
-        // The 9-point stencil's rows in row order take 4 colours, 2 x 2 blocks of the grid.
-        assert_eq!(classes.len(), 4);
-        let mut seen = vec![0; a.nrows()];
-        for class in &classes {
-            for &i in class {
-                seen[i] += 1;
-                for &k in a.symbolic().row_idx_of_col_raw(i) {
-                    assert!(
-                        k == i || !class.contains(&k),
-                        "rows {i} and {k} share a colour"
-                    );
+    fn runs_cover_every_row_once_and_never_couple_two_of_a_colour() {
+        let a = nine_point_grid(40);
+        let plan = SweepPlan::new(&a);
+        let n = a.nrows();
+        // The order is a permutation, and a breadth-first one: a row's neighbours lie within
+        // two grid lines (80 positions) of it.
+        let mut sorted = plan.order.clone();
+        sorted.sort_unstable();
+        assert_eq!(sorted, (0..n).collect::<Vec<_>>());
+        let max_reach = (0..n)
+            .flat_map(|p| {
+                plan.cols[plan.starts[p]..plan.starts[p + 1]]
+                    .iter()
+                    .map(move |&k| (k as usize).abs_diff(p))
+            })
+            .max()
+            .unwrap();
+        assert!(max_reach <= 2 * 40 + 1, "{max_reach}");
+        // 1,600 rows in runs of RUN_ROWS: more than one colour, more than one run per colour.
+        assert!(
+            plan.colours.len() > 1 && plan.colours.len() < 13,
+            "{}",
+            plan.colours.len()
+        );
+        let mut seen = vec![0; n];
+        for colour in &plan.colours {
+            let mut in_colour = vec![false; n];
+            for run in colour {
+                run.clone().for_each(|p| in_colour[p] = true);
+            }
+            for run in colour {
+                for p in run.clone() {
+                    seen[p] += 1;
+                    for &k in &plan.cols[plan.starts[p]..plan.starts[p + 1]] {
+                        let k = k as usize;
+                        assert!(
+                            run.contains(&k) || !in_colour[k],
+                            "positions {p} and {k} in two runs of one colour"
+                        );
+                    }
                 }
             }
         }
@@ -238,15 +383,35 @@ mod tests {
     }
 
     #[test]
+    fn sweeps_give_the_same_weights_on_one_thread_and_on_two() {
+        let (k, m) = (40, 4);
+        let a = nine_point_grid(k);
+        let nf = k * k;
+        let plan = SweepPlan::new(&a);
+        let g: Vec<f64> = (0..nf * m).map(|i| (0.37 * i as f64).sin()).collect();
+        let w = vec![1.0 / m as f64; nf * m];
+        let run = |threads: usize| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| gauss_seidel_pou(&plan, &g, &w, nf, m, 5))
+        };
+        let one = run(1);
+        assert_eq!(one, run(2));
+        assert_ne!(one, w);
+    }
+
+    #[test]
     fn sweeps_descend_to_the_constrained_minimum() {
         let (nf, m) = (30, 3);
         let a = crate::sparse::path_matrix(nf);
         let g: Vec<f64> = (0..nf * m).map(|k| (0.7 * k as f64).sin()).collect();
-        let colouring = Colouring::new(&a);
+        let plan = SweepPlan::new(&a);
         let mut w = vec![1.0 / m as f64; nf * m];
         let (mut last, _) = energy_and_gradient(&a, &g, &w, nf);
         for _ in 0..3000 {
-            w = gauss_seidel_pou(&a, &colouring, &g, &w, nf, m, 1);
+            w = gauss_seidel_pou(&plan, &g, &w, nf, m, 1);
             let (e, _) = energy_and_gradient(&a, &g, &w, nf);
             assert!(
                 e <= last + 1e-13,
