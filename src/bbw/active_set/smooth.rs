@@ -258,7 +258,7 @@ fn sweep_run(
 /// Euclidean projection of `u` onto the simplex `{x >= 0, sum x = 1}`, in place: `x = max(u -
 /// theta, 0)`, `theta` found by Michelot's (1986) iteration: the mean excess over 1 of the
 /// entries above the last `theta`, from all of them, rises until that set stops shrinking
-/// (at most `u.len()` passes, 2-3 on a round's rows, where sorting them cost more).
+/// (at most `u.len()` passes; on a round's rows cheaper than sorting them, docs/solver.md).
 pub(super) fn project_simplex(u: &mut [f64]) {
     let excess = |theta: f64| {
         let (sum, count) = u
