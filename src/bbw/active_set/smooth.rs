@@ -11,7 +11,7 @@
 //! nonsmooth Newton multigrid (Graeser & Kornhuber 2009) it settles the zero set locally,
 //! where a round's exact solve on a support guess corrects it globally.
 //!
-//! The rows are swept block by block ([`SweepPlan`]): `A`'s rows are renumbered in
+//! The rows are swept run by run ([`SweepPlan`]): `A`'s rows are renumbered in
 //! breadth-first order, cut into runs of consecutive rows, and the runs coloured so that no two
 //! of one colour are coupled by `A`. Runs of one colour are swept in parallel, each in its own
 //! row order, so the sweep is still Gauss-Seidel and gives the same result on any number of
