@@ -126,26 +126,11 @@ impl Coupling {
     /// vertices ordered class by class and the class boundaries (`ptr`, length classes + 1).
     pub(crate) fn colour_order(&self) -> (Vec<usize>, Vec<usize>) {
         let n = self.n();
-        let mut colour = vec![usize::MAX; n];
-        let mut stamp: Vec<usize> = Vec::new();
-        let mut counts: Vec<usize> = Vec::new();
-        for v in 0..n {
-            for p in self.col(v) {
-                let c = colour[self.rows[p]];
-                if c != usize::MAX {
-                    stamp[c] = v + 1;
-                }
-            }
-            let c = (0..stamp.len())
-                .find(|&c| stamp[c] != v + 1)
-                .unwrap_or(stamp.len());
-            if c == stamp.len() {
-                stamp.push(0);
-                counts.push(0);
-            }
-            colour[v] = c;
-            counts[c] += 1;
-        }
+        let (colour, classes) = crate::sparse::greedy_colouring(n, |v, visit| {
+            self.col(v).for_each(|p| visit(self.rows[p]));
+        });
+        let mut counts = vec![0; classes];
+        colour.iter().for_each(|&c| counts[c] += 1);
         let mut ptr = vec![0; counts.len() + 1];
         for c in 0..counts.len() {
             ptr[c + 1] = ptr[c] + counts[c];

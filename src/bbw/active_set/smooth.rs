@@ -24,7 +24,7 @@ use std::ops::Range;
 
 use rayon::prelude::*;
 
-use crate::sparse::Csc;
+use crate::sparse::{greedy_colouring, Csc};
 
 /// Rows per run of [`SweepPlan`]. Longer runs sweep a little faster, but each pass along one
 /// propagates further in one direction: runs of 256 rows took the 7.7k armadillo of `bench
@@ -133,33 +133,21 @@ fn breadth_first(a: &Csc, root: usize, seen: &mut [bool]) -> Vec<usize> {
     queue
 }
 
-/// Greedy colouring of `runs` (in order): each run takes the smallest colour that no run
-/// coupled to it by an entry (`starts`, `cols`) holds.
+/// `runs` grouped by colour: a greedy colouring of the runs in order
+/// ([`greedy_colouring`]), two runs coupled when an entry (`starts`, `cols`) couples their rows.
 fn colour_runs(runs: Vec<Range<usize>>, starts: &[usize], cols: &[u32]) -> Vec<Vec<Range<usize>>> {
-    let n = starts.len() - 1;
-    let mut run_of = vec![0usize; n];
+    let mut run_of = vec![0usize; starts.len() - 1];
     for (r, run) in runs.iter().enumerate() {
         run_of[run.clone()].iter_mut().for_each(|x| *x = r);
     }
-    let mut colour = vec![usize::MAX; runs.len()];
-    // taken[c] == r: a run coupled to run r holds colour c.
-    let mut taken: Vec<usize> = Vec::new();
-    let mut colours: Vec<Vec<Range<usize>>> = Vec::new();
-    for (r, run) in runs.into_iter().enumerate() {
-        for &k in &cols[starts[run.start]..starts[run.end]] {
-            let c = colour[run_of[k as usize]];
-            if c != usize::MAX {
-                taken[c] = r;
-            }
-        }
-        let c = (0..colours.len())
-            .find(|&c| taken[c] != r)
-            .unwrap_or(colours.len());
-        if c == colours.len() {
-            colours.push(Vec::new());
-            taken.push(usize::MAX);
-        }
-        colour[r] = c;
+    let (colour, count) = greedy_colouring(runs.len(), |r, visit| {
+        let entries = starts[runs[r].start]..starts[runs[r].end];
+        cols[entries]
+            .iter()
+            .for_each(|&k| visit(run_of[k as usize]));
+    });
+    let mut colours = vec![Vec::new(); count];
+    for (run, c) in runs.into_iter().zip(colour) {
         colours[c].push(run);
     }
     colours
