@@ -6,6 +6,7 @@
 
 pub mod bbw;
 pub mod constraints;
+mod cpu;
 pub mod error;
 pub mod field;
 mod geometry;

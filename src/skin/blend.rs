@@ -440,18 +440,6 @@ where
     }
 }
 
-/// Whether this CPU runs the AVX2/FMA kernels.
-pub(crate) fn has_avx2() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        false
-    }
-}
-
 /// Error for the first vertex of a chunk holding a non-finite number, if any.
 #[inline(always)]
 pub(crate) fn first_nonfinite(first: usize, d: usize, chunk: &[f64]) -> Result<(), ChunkError> {

@@ -6,8 +6,7 @@
 use ndarray::{Array2, ArrayView2, ArrayView3, ArrayViewMut2};
 
 use super::blend::{
-    blend, first_nonfinite, has_avx2, par_chunks, to_skin_error, ChunkError, Held, Influences,
-    Lanes,
+    blend, first_nonfinite, par_chunks, to_skin_error, ChunkError, Held, Influences, Lanes,
 };
 use super::quat::{from_matrix, Quat};
 use super::{
@@ -80,7 +79,7 @@ pub fn dqs_into(
     let (o, no) = outputs(n, 3, &mut out, nout, nsl.is_some())?;
     let held = Held::new(w);
     let inf = held.influences()?;
-    let avx = has_avx2();
+    let avx = crate::cpu::has_avx2();
     let kernel = |first: usize, o: &mut [f64], no: Option<&mut [f64]>| {
         let rows = o.len() / 3;
         let vc = &vsl[first * 3..(first + rows) * 3];

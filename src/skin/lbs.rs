@@ -8,8 +8,7 @@
 use ndarray::{Array2, ArrayView2, ArrayView3, ArrayViewMut2};
 
 use super::blend::{
-    blend, first_nonfinite, has_avx2, par_chunks, to_skin_error, ChunkError, Held, Influences,
-    Lanes,
+    blend, first_nonfinite, par_chunks, to_skin_error, ChunkError, Held, Influences, Lanes,
 };
 use super::{
     check_normals, explain_nonfinite, outputs, slice_of, standard2, transform_blocks, Weights,
@@ -96,7 +95,7 @@ fn run<const D: usize>(
     let held = Held::new(w);
     let inf = held.influences()?;
 
-    let avx = has_avx2();
+    let avx = crate::cpu::has_avx2();
     let kernel = |first: usize, o: &mut [f64], no: Option<&mut [f64]>| {
         let rows = o.len() / D;
         let vc = &vsl[first * D..(first + rows) * D];
