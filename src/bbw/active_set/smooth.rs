@@ -357,11 +357,24 @@ pub(super) fn project_simplex(u: &mut [f64]) {
     // Without a branch per entry: whether an entry is above `theta` is a coin toss the
     // processor mispredicts.
     let excess = |theta: f64| {
-        let (sum, count) = u.iter().fold((0.0, 0usize), |(s, c), &x| {
+        // Four partial sums, one register: a single running sum waits on each addition.
+        let (mut sum, mut count) = ([0.0; LANES], [0.0; LANES]);
+        let chunks = u.chunks_exact(LANES);
+        let tail = chunks.remainder();
+        for c in chunks {
+            for q in 0..LANES {
+                let above = c[q] > theta;
+                sum[q] += if above { c[q] } else { 0.0 };
+                count[q] += if above { 1.0 } else { 0.0 };
+            }
+        }
+        for (q, &x) in tail.iter().enumerate() {
             let above = x > theta;
-            (s + if above { x } else { 0.0 }, c + usize::from(above))
-        });
-        (sum - 1.0) / count as f64
+            sum[q] += if above { x } else { 0.0 };
+            count[q] += if above { 1.0 } else { 0.0 };
+        }
+        let total = (sum[0] + sum[1]) + (sum[2] + sum[3]);
+        (total - 1.0) / ((count[0] + count[1]) + (count[2] + count[3]))
     };
     let mut theta = excess(f64::NEG_INFINITY);
     loop {
