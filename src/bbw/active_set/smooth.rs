@@ -188,7 +188,17 @@ pub(super) fn gauss_seidel_pou(
             colour
                 .par_iter()
                 .zip(bufs.par_iter_mut())
-                .for_each(|(run, own)| sweep_run(plan, &g, &rows, run.clone(), m, own));
+                .for_each(|(run, own)| {
+                    let pass = RunPass {
+                        plan,
+                        g: &g,
+                        rows: &rows,
+                        run: run.clone(),
+                        m,
+                        stride,
+                    };
+                    sweep_run(&pass, own)
+                });
             for (run, own) in colour.iter().zip(bufs.iter()) {
                 rows[rows_of(run)].copy_from_slice(own);
             }
@@ -218,51 +228,47 @@ fn gather_rows(x: &[f64], order: &[usize], m: usize, stride: usize) -> Vec<f64> 
     rows
 }
 
-/// Into `own`: the rows `run` of `rows` after one Gauss-Seidel pass over them in order, the
-/// other rows held at `rows`: each row the simplex projection of
-/// `-(g_p + sum_{k != p} a_pk w_k) / a_pp`, or kept when `a_pp` is not positive. Rows are
-/// `m` weights padded to `own.len() / run.len()`.
-fn sweep_run(
-    plan: &SweepPlan,
-    g: &[f64],
-    rows: &[f64],
+/// One run's pass: the plan, `G` and the rows of the other runs (`rows`), each row `m`
+/// weights padded to `stride`.
+struct RunPass<'a> {
+    plan: &'a SweepPlan,
+    g: &'a [f64],
+    rows: &'a [f64],
     run: Range<usize>,
     m: usize,
-    own: &mut [f64],
-) {
+    stride: usize,
+}
+
+/// Into `own`: the rows of the run after one Gauss-Seidel pass over them in order, the other
+/// rows held at `rows`: each row the simplex projection of `-(g_p + sum_{k != p} a_pk w_k) /
+/// a_pp`, or kept when `a_pp` is not positive.
+fn sweep_run(pass: &RunPass, own: &mut [f64]) {
     #[cfg(target_arch = "x86_64")]
     if crate::cpu::has_avx2() {
         // SAFETY: the CPU has AVX2 and FMA (checked at run time).
-        return unsafe { sweep_run_avx2(plan, g, rows, run, m, own) };
+        return unsafe { sweep_run_avx2(pass, own) };
     }
-    sweep_run_body(plan, g, rows, run, m, own)
+    sweep_run_body(pass, own)
 }
 
 /// [`sweep_run_body`] compiled for AVX2: the same operations in the same order (no fused
 /// multiply-adds), four doubles to a register instead of two.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-unsafe fn sweep_run_avx2(
-    plan: &SweepPlan,
-    g: &[f64],
-    rows: &[f64],
-    run: Range<usize>,
-    m: usize,
-    own: &mut [f64],
-) {
-    sweep_run_body(plan, g, rows, run, m, own)
+unsafe fn sweep_run_avx2(pass: &RunPass, own: &mut [f64]) {
+    sweep_run_body(pass, own)
 }
 
 #[inline(always)]
-fn sweep_run_body(
-    plan: &SweepPlan,
-    g: &[f64],
-    rows: &[f64],
-    run: Range<usize>,
-    m: usize,
-    own: &mut [f64],
-) {
-    let stride = m.next_multiple_of(LANES);
+fn sweep_run_body(pass: &RunPass, own: &mut [f64]) {
+    let RunPass {
+        plan,
+        g,
+        rows,
+        ref run,
+        m,
+        stride,
+    } = *pass;
     own.copy_from_slice(&rows[run.start * stride..run.end * stride]);
     let mut target = vec![0.0; stride];
     for p in run.clone() {
