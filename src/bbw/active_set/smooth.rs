@@ -133,18 +133,15 @@ fn breadth_first(a: &Csc, root: usize, seen: &mut [bool]) -> Vec<usize> {
     queue
 }
 
-/// `runs` grouped by colour: a greedy colouring of the runs in order
-/// ([`greedy_colouring`]), two runs coupled when an entry (`starts`, `cols`) couples their rows.
+/// `runs` (run `r` the positions `r * RUN_ROWS..`) grouped by colour: a greedy colouring of the
+/// runs in order ([`greedy_colouring`]), two runs coupled when an entry (`starts`, `cols`)
+/// couples their rows.
 fn colour_runs(runs: Vec<Range<usize>>, starts: &[usize], cols: &[u32]) -> Vec<Vec<Range<usize>>> {
-    let mut run_of = vec![0usize; starts.len() - 1];
-    for (r, run) in runs.iter().enumerate() {
-        run_of[run.clone()].iter_mut().for_each(|x| *x = r);
-    }
     let (colour, count) = greedy_colouring(runs.len(), |r, visit| {
         let entries = starts[runs[r].start]..starts[runs[r].end];
         cols[entries]
             .iter()
-            .for_each(|&k| visit(run_of[k as usize]));
+            .for_each(|&k| visit(k as usize / RUN_ROWS));
     });
     let mut colours = vec![Vec::new(); count];
     for (run, c) in runs.into_iter().zip(colour) {
@@ -365,20 +362,17 @@ pub(super) fn project_simplex(u: &mut [f64]) {
     let excess = |theta: f64| {
         // Four partial sums, one register: a single running sum waits on each addition.
         let (mut sum, mut count) = ([0.0; LANES], [0.0; LANES]);
-        let chunks = u.chunks_exact(LANES);
-        let tail = chunks.remainder();
-        for c in chunks {
-            for q in 0..LANES {
-                let above = c[q] > theta;
-                sum[q] += if above { c[q] } else { 0.0 };
-                count[q] += if above { 1.0 } else { 0.0 };
-            }
-        }
-        for (q, &x) in tail.iter().enumerate() {
+        let mut add = |q: usize, x: f64| {
             let above = x > theta;
             sum[q] += if above { x } else { 0.0 };
             count[q] += if above { 1.0 } else { 0.0 };
+        };
+        let chunks = u.chunks_exact(LANES);
+        let tail = chunks.remainder();
+        for c in chunks {
+            (0..LANES).for_each(|q| add(q, c[q]));
         }
+        tail.iter().enumerate().for_each(|(q, &x)| add(q, x));
         let total = (sum[0] + sum[1]) + (sum[2] + sum[3]);
         (total - 1.0) / ((count[0] + count[1]) + (count[2] + count[3]))
     };
