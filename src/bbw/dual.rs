@@ -54,7 +54,13 @@ pub fn pou_eval(p: &EliminatedProblem, y: &[f64]) -> DualPoint {
                 .zip(yc.iter().zip(&mean))
                 .for_each(|(x, (y, a))| *x = y - a);
         });
-    p.solve_in_place(&mut x); // x = Q11 Y P_m; its rows have zero mean.
+    // x = Q11 Y P_m. The rows of Y P_m sum to zero, so those of x do too: the last column is
+    // minus the sum of the others, and the solve needs only m - 1 right-hand sides.
+    let (head, last) = x.split_at_mut(nf * (m - 1));
+    p.solve_in_place(head);
+    last.par_iter_mut().enumerate().for_each(|(i, v)| {
+        *v = -(0..m - 1).map(|j| head[j * nf + i]).sum::<f64>();
+    });
     let w: Vec<f64> =
         p.w0.par_iter()
             .zip(x.par_iter())
