@@ -40,8 +40,7 @@ pub fn minimize(
         return Ok(0);
     }
     for it in 1..=opts.max_iter {
-        hist.direction(&g, &mut d);
-        let mut slope = vector::dot(&d, &g);
+        let mut slope = hist.direction(&g, &mut d);
         if slope >= 0.0 {
             // Not a descent direction (numerical trouble): restart with steepest descent.
             hist.clear();
@@ -81,18 +80,25 @@ pub fn minimize(
     Ok(iterations)
 }
 
-/// The last `memory` correction pairs `(s, y)` with `rho = 1 / <s, y>`, oldest first. Storage
-/// of the pair that drops out is reused for the next one.
+/// The last `memory` correction pairs `(s, y)`, oldest first, stored in single precision, with
+/// their inner products. The direction is `-H g` for the L-BFGS matrix `H` of the stored
+/// (rounded) pairs, so it is a descent direction like any other; storing them in half the
+/// bytes halves the memory traffic that bounds the direction at large `n`. Storage of the pair
+/// that drops out is reused for the next one.
 struct History {
     memory: usize,
-    s: Vec<Vec<f64>>,
-    y: Vec<Vec<f64>>,
-    rho: Vec<f64>,
-    /// `<y, y>` of the newest pair (the initial Hessian scaling).
-    yy_last: f64,
-    /// Buffers for the next pair.
-    s_free: Vec<f64>,
-    y_free: Vec<f64>,
+    s: Vec<Vec<f32>>,
+    y: Vec<Vec<f32>>,
+    /// `sy[i][j] = <s_i, y_j>` and `yy[i][j] = <y_i, y_j>` of the stored pairs.
+    sy: Vec<Vec<f64>>,
+    yy: Vec<Vec<f64>>,
+    /// The newest pair's inner products are still to be computed; the next `direction` does it
+    /// in the same pass over the pairs as its own products.
+    pending: bool,
+    /// The newest pair's stored values in double precision while `pending`; otherwise the
+    /// buffers a new pair is formed in.
+    s_new: Vec<f64>,
+    y_new: Vec<f64>,
 }
 
 impl History {
@@ -101,10 +107,11 @@ impl History {
             memory,
             s: Vec::new(),
             y: Vec::new(),
-            rho: Vec::new(),
-            yy_last: 0.0,
-            s_free: vec![0.0; n],
-            y_free: vec![0.0; n],
+            sy: Vec::new(),
+            yy: Vec::new(),
+            pending: false,
+            s_new: vec![0.0; n],
+            y_new: vec![0.0; n],
         }
     }
 
@@ -115,56 +122,137 @@ impl History {
     fn clear(&mut self) {
         self.s.clear();
         self.y.clear();
-        self.rho.clear();
+        self.sy.clear();
+        self.yy.clear();
+        self.pending = false;
     }
 
     /// Stores the pair of an accepted step unless its curvature `<s, y>` is not safely positive.
     fn offer(&mut self, (x1, x0): (&[f64], &[f64]), (g1, g0): (&[f64], &[f64])) {
+        if self.pending {
+            self.products(&[]);
+        }
         let [ss, yy, sy] =
-            vector::correction_pair(&mut self.s_free, &mut self.y_free, (x1, x0), (g1, g0));
+            vector::correction_pair(&mut self.s_new, &mut self.y_new, (x1, x0), (g1, g0));
         if sy <= 1e-16 * ss.sqrt() * yy.sqrt() || self.memory == 0 {
             return;
         }
-        let n = self.s_free.len();
-        let (s_next, y_next) = if self.s.len() == self.memory {
-            self.rho.remove(0);
+        let (mut s_next, mut y_next) = if self.s.len() == self.memory {
+            for m in [&mut self.sy, &mut self.yy] {
+                m.remove(0);
+                m.iter_mut().for_each(|row| {
+                    row.remove(0);
+                });
+            }
             (self.s.remove(0), self.y.remove(0))
         } else {
+            let n = self.s_new.len();
             (vec![0.0; n], vec![0.0; n])
         };
-        self.s.push(std::mem::replace(&mut self.s_free, s_next));
-        self.y.push(std::mem::replace(&mut self.y_free, y_next));
-        self.rho.push(1.0 / sy);
-        self.yy_last = yy;
+        store_rounded(&mut s_next, &mut self.s_new);
+        store_rounded(&mut y_next, &mut self.y_new);
+        self.s.push(s_next);
+        self.y.push(y_next);
+        for m in [&mut self.sy, &mut self.yy] {
+            m.iter_mut().for_each(|row| row.push(0.0));
+            m.push(vec![0.0; m.len() + 1]);
+        }
+        self.pending = true;
     }
 
-    /// The two-loop recursion (Nocedal & Wright, Alg. 7.4), `d = -H g`. Each update of `d` is
-    /// fused with the inner product the next step needs, so `d` is streamed once per stored
-    /// vector.
-    fn direction(&self, g: &[f64], d: &mut [f64]) {
+    /// One pass over the stored pairs: `[<s_i, v>.., <y_i, v>..]` for each `v` in `with`, and
+    /// the pending inner products of the newest pair. A newest pair whose rounded curvature is
+    /// not positive is dropped.
+    fn products(&mut self, with: &[&[f64]]) -> Vec<Vec<f64>> {
         let k = self.s.len();
-        let mut alpha = vec![0.0; k];
-        let mut next = vector::update_dot(0.0, d, -1.0, g, self.s.last().map(|v| v.as_slice()));
-        for i in (0..k).rev() {
-            alpha[i] = self.rho[i] * next;
-            let z = if i > 0 {
-                Some(self.s[i - 1].as_slice())
-            } else {
-                None
-            };
-            next = vector::update_dot(1.0, d, -alpha[i], &self.y[i], z);
+        let rows: Vec<&[f32]> = self.s.iter().chain(&self.y).map(Vec::as_slice).collect();
+        let mut cols: Vec<&[f64]> = with.to_vec();
+        if self.pending {
+            cols.extend([self.y_new.as_slice(), self.s_new.as_slice()]);
         }
-        if k == 0 {
-            return;
+        let nc = cols.len();
+        let g = vector::inner_products(&rows, &cols);
+        let col = |j: usize| -> Vec<f64> { (0..2 * k).map(|i| g[i * nc + j]).collect() };
+        if self.pending {
+            let (y_new, s_new) = (col(with.len()), col(with.len() + 1));
+            let n = k - 1;
+            for i in 0..k {
+                self.sy[i][n] = y_new[i];
+                self.sy[n][i] = s_new[k + i];
+                self.yy[i][n] = y_new[k + i];
+                self.yy[n][i] = y_new[k + i];
+            }
+            self.pending = false;
+            if self.sy[n][n] <= 0.0 || self.yy[n][n] <= 0.0 {
+                for m in [&mut self.sy, &mut self.yy] {
+                    m.pop();
+                    m.iter_mut().for_each(|row| {
+                        row.pop();
+                    });
+                }
+                self.s.pop();
+                self.y.pop();
+                return self.products(with);
+            }
         }
-        let gamma = 1.0 / (self.rho[k - 1] * self.yy_last);
-        next = vector::update_dot(gamma, d, 0.0, g, Some(&self.y[0]));
-        for (i, (a, rho)) in alpha.iter().zip(&self.rho).enumerate() {
-            let beta = rho * next;
-            let z = self.y.get(i + 1).map(|v| v.as_slice());
-            next = vector::update_dot(1.0, d, a - beta, &self.s[i], z);
-        }
+        (0..with.len()).map(col).collect()
     }
+
+    /// `d = -H g` by the compact representation of the L-BFGS matrix (Byrd, Nocedal & Schnabel
+    /// 1994, eq. 3.1, `H_0 = gamma I`); returns `<d, g>`. It equals the two-loop recursion
+    /// (Nocedal & Wright, Alg. 7.4) and, like it, reads every stored vector twice; the two-loop
+    /// besides reads and writes `d` once per pair.
+    fn direction(&mut self, g: &[f64], d: &mut [f64]) -> f64 {
+        let pq = if self.is_empty() {
+            Vec::new()
+        } else {
+            self.products(&[g]).remove(0)
+        };
+        let k = self.s.len();
+        if k == 0 {
+            return vector::update_dot(0.0, d, -1.0, g, Some(g));
+        }
+        let (p, q) = pq.split_at(k);
+        let (sy, yy) = (&self.sy, &self.yy);
+        let gamma = sy[k - 1][k - 1] / yy[k - 1][k - 1];
+        // a = R^{-1} p, R the upper triangle of S^T Y.
+        let mut a = vec![0.0; k];
+        for i in (0..k).rev() {
+            let r: f64 = (i + 1..k).map(|j| sy[i][j] * a[j]).sum();
+            a[i] = (p[i] - r) / sy[i][i];
+        }
+        // c = R^{-T} ((D + gamma Y^T Y) a - gamma q), D the diagonal of S^T Y.
+        let mut c = vec![0.0; k];
+        for i in 0..k {
+            let t = sy[i][i] * a[i] + gamma * (0..k).map(|j| yy[i][j] * a[j]).sum::<f64>()
+                - gamma * q[i];
+            let r: f64 = (0..i).map(|j| sy[j][i] * c[j]).sum();
+            c[i] = (t - r) / sy[i][i];
+        }
+        // -H g = -gamma g - S c + gamma Y a.
+        let mut terms: Vec<(f64, &[f32])> = Vec::with_capacity(2 * k);
+        terms.extend(c.iter().zip(&self.s).map(|(c, s)| (-c, s.as_slice())));
+        terms.extend(
+            a.iter()
+                .zip(&self.y)
+                .map(|(a, y)| (gamma * a, y.as_slice())),
+        );
+        vector::combine_dot(d, (-gamma, g), &terms, g)
+    }
+}
+
+/// `stored <- v` in single precision, and `v <- stored` (what the products must be of).
+fn store_rounded(stored: &mut [f32], v: &mut [f64]) {
+    use rayon::prelude::*;
+    stored
+        .par_chunks_mut(1 << 14)
+        .zip(v.par_chunks_mut(1 << 14))
+        .for_each(|(s, v)| {
+            s.iter_mut().zip(v.iter_mut()).for_each(|(s, v)| {
+                *s = *v as f32;
+                *v = f64::from(*s);
+            })
+        });
 }
 
 #[cfg(test)]
@@ -196,7 +284,7 @@ mod tests {
     }
 
     #[test]
-    fn fused_direction_equals_the_textbook_two_loop_as_pairs_roll_over() {
+    fn compact_direction_equals_the_textbook_two_loop_as_pairs_roll_over() {
         // Steps of a strictly convex quadratic 1/2 x^T diag(h) x give pairs with <s, y> > 0.
         let n = 40_000;
         let h: Vec<f64> = (0..n).map(|i| 1.0 + (i % 97) as f64).collect();
@@ -212,14 +300,22 @@ mod tests {
             let g0: Vec<f64> = x0.iter().zip(&h).map(|(x, h)| x * h).collect();
             let g1: Vec<f64> = x1.iter().zip(&h).map(|(x, h)| x * h).collect();
             hist.offer((&x1, &x0), (&g1, &g0));
-            kept_s.push(x1.iter().zip(&x0).map(|(a, b)| a - b).collect());
-            kept_y.push(g1.iter().zip(&g0).map(|(a, b)| a - b).collect());
+            // The history keeps its pairs in single precision.
+            let rounded = |v: f64| f64::from(v as f32);
+            kept_s.push(x1.iter().zip(&x0).map(|(a, b)| rounded(a - b)).collect());
+            kept_y.push(g1.iter().zip(&g0).map(|(a, b)| rounded(a - b)).collect());
             if kept_s.len() > 4 {
                 kept_s.remove(0);
                 kept_y.remove(0);
             }
+            if step == 3 {
+                x0 = x1; // two pairs offered before the next direction
+                continue;
+            }
             let mut d = vec![0.0; n];
-            hist.direction(&g1, &mut d);
+            let slope = hist.direction(&g1, &mut d);
+            let dg: f64 = d.iter().zip(&g1).map(|(a, b)| a * b).sum();
+            assert!((slope - dg).abs() <= 1e-12 * dg.abs(), "step {step}");
             let expect = two_loop(&g1, &kept_s, &kept_y);
             let scale = expect.iter().fold(0.0f64, |m, v| m.max(v.abs()));
             let err = d

@@ -126,10 +126,10 @@ impl BbwOptions {
     }
 
     /// Bytes of the dense vectors a solve with `nf` free rows and `m` columns holds besides the
-    /// factors: L-BFGS's `memory` correction pairs and about a dozen working copies, each of
-    /// the size of the dual variables.
+    /// factors: L-BFGS's `memory` correction pairs (two single-precision vectors each) and
+    /// about a dozen double-precision working copies, each of the size of the dual variables.
     pub(crate) fn vector_bytes(&self, nf: usize, m: usize) -> usize {
         let entries = nf.saturating_mul(m).saturating_mul(self.dual_blocks());
-        entries.saturating_mul(8 * (2 * self.memory + 12))
+        entries.saturating_mul(8 * (self.memory + 12))
     }
 }
