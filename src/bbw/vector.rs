@@ -68,9 +68,9 @@ pub fn add_scaled(out: &mut [f64], a: &[f64], t: f64, b: &[f64]) {
 /// addition's latency, which with a few dozen products per entry would bound the pass.
 const LANES: usize = 8;
 
-/// Entries per block of the many-vector kernels (a multiple of `LANES`): a block of every
-/// vector they read fits the first-level cache, so each comes from memory once however many
-/// products use it.
+/// Entries per block of the many-vector kernels (a multiple of `LANES`): the block of the
+/// vectors every product uses (the columns, or `out`) stays in cache while the others stream
+/// past it, so each vector comes from memory once however many products use it.
 const BLOCK: usize = 2048;
 
 /// `acc[l] += sum of a[i] b[i]` over the entries `i = l mod LANES` (the last, fewer than
