@@ -44,7 +44,7 @@ pub fn minimize(
         if slope >= 0.0 {
             // Not a descent direction (numerical trouble): restart with steepest descent.
             hist.clear();
-            slope = vector::update_dot(0.0, &mut d, -1.0, &g, Some(&g));
+            slope = vector::combine_dot(&mut d, (-1.0, &g), &[], &g);
         }
         // First step: scale so that |step| = 1; afterwards the BFGS scaling makes t = 1 natural.
         let mut t = if hist.is_empty() {
@@ -210,7 +210,7 @@ impl History {
         };
         let k = self.s.len();
         if k == 0 {
-            return vector::update_dot(0.0, d, -1.0, g, Some(g));
+            return vector::combine_dot(d, (-1.0, g), &[], g);
         }
         let (p, q) = pq.split_at(k);
         let (sy, yy) = (&self.sy, &self.yy);

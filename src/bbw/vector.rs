@@ -31,28 +31,6 @@ pub fn dot(a: &[f64], b: &[f64]) -> f64 {
     ordered_sum(parts)[0]
 }
 
-/// `y <- beta y + alpha x` (`y`'s old entries are not read when `beta` is 0), then returns
-/// `<z, y>` of the updated `y` (0 without `z`).
-pub fn update_dot(beta: f64, y: &mut [f64], alpha: f64, x: &[f64], z: Option<&[f64]>) -> f64 {
-    let parts: Vec<[f64; 1]> = y
-        .par_chunks_mut(CHUNK)
-        .zip(x.par_chunks(CHUNK))
-        .enumerate()
-        .map(|(c, (yc, xc))| {
-            if beta == 0.0 {
-                yc.iter_mut().zip(xc).for_each(|(yi, xi)| *yi = alpha * xi);
-            } else {
-                yc.iter_mut()
-                    .zip(xc)
-                    .for_each(|(yi, xi)| *yi = beta * *yi + alpha * xi);
-            }
-            let zc = z.map(|z| &z[c * CHUNK..c * CHUNK + yc.len()]);
-            [zc.map_or(0.0, |zc| zc.iter().zip(yc.iter()).map(|(p, q)| p * q).sum())]
-        })
-        .collect();
-    ordered_sum(parts)[0]
-}
-
 /// `out <- a + t b`.
 pub fn add_scaled(out: &mut [f64], a: &[f64], t: f64, b: &[f64]) {
     out.par_chunks_mut(CHUNK)
@@ -245,12 +223,12 @@ mod tests {
         let rel = |x: f64, y: f64| (x - y).abs() / y.abs().max(1e-300);
         assert!(rel(dot(&a, &b), serial_dot(&a, &b)) < 1e-12);
 
+        // Without further terms: `out <- t0 v0` and `<z, out>`.
         let mut y = a.clone();
-        let d = update_dot(2.0, &mut y, -3.0, &b, Some(&a));
-        let expect: Vec<f64> = a.iter().zip(&b).map(|(p, q)| 2.0 * p - 3.0 * q).collect();
+        let d = combine_dot(&mut y, (-3.0, &b), &[], &a);
+        let expect: Vec<f64> = b.iter().map(|q| -3.0 * q).collect();
         assert_eq!(y, expect);
         assert!(rel(d, serial_dot(&a, &expect)) < 1e-12);
-        assert_eq!(update_dot(1.0, &mut y, 0.0, &b, None), 0.0);
 
         let mut out = vec![0.0; n];
         add_scaled(&mut out, &a, 0.5, &b);
