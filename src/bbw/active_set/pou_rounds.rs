@@ -62,12 +62,12 @@ const SMOOTHER_RISES: usize = 2;
 /// weights are 0 and the sweeps keep them there, and so cuts into the optimal support as the
 /// sign rules' outer-half rule is there to prevent: on the 85k-vertex armadillo of `bench
 /// scale`, 4 seeds in 10 then took 15-16 rounds, where both take 10-12 (docs/solver.md).
-fn smoothed_support(smoothed: &[f64], rules: &[bool], above: f64) -> Vec<bool> {
-    smoothed
-        .iter()
-        .zip(rules)
-        .map(|(&x, &kept)| x > above || kept)
-        .collect()
+fn smoothed_support(smoothed: &[f64], mut rules: Vec<bool>, above: f64) -> Vec<bool> {
+    rules
+        .iter_mut()
+        .zip(smoothed)
+        .for_each(|(kept, &x)| *kept |= x > above);
+    rules
 }
 
 /// The rounds' state, kept across an L-BFGS intermission: the support guess
@@ -264,10 +264,11 @@ pub(super) fn pou_rounds(
         // bones: every weight positive on most of the mesh) to crawl a ring per round. If the
         // overshoot also widened the gap, its weights dip negative over wide bands, and
         // going on from it costs more rounds than it saves: the round is undone.
-        // The smoother's support drops entries of tiny weight that the sign rules then join
-        // again; near the optimum the two can cycle (a 7.7k-vertex armadillo with 20 handles
-        // stalled at a gap of 7e-7). From the second round whose own gap did not fall, the
-        // sign rules alone decide (from the first, the 2D pants took 107 rounds, not 63).
+        // Where the smoothed weights alone decided what leaves, the smoother dropped entries
+        // of tiny weight that the sign rules then joined again, and near the optimum the two
+        // cycled (a 7.7k-vertex armadillo with 20 handles stalled at a gap of 7e-7). From the
+        // second round whose own gap did not fall, the sign rules alone decide (from the
+        // first, the 2D pants took 107 rounds, not 63).
         if own_gap >= dilation.last_gap {
             *smoother_rises += 1;
         }
@@ -275,7 +276,7 @@ pub(super) fn pou_rounds(
             .as_ref()
             .filter(|_| *smoother_rises < SMOOTHER_RISES);
         let with_smoother = |rules: Vec<bool>| match follow {
-            Some(smoothed) => smoothed_support(smoothed, &rules, opts.tol),
+            Some(smoothed) => smoothed_support(smoothed, rules, opts.tol),
             None => rules,
         };
         if dilation.last_dilated && upper > dilation.last_upper {
@@ -350,7 +351,7 @@ mod tests {
         // Entries: smoothed above / at / below `above`, crossed with kept or dropped by the rules.
         let smoothed = [2e-9, 2e-9, 1e-9, 1e-9, 0.0, 0.0];
         let rules = [true, false, true, false, true, false];
-        let next = smoothed_support(&smoothed, &rules, 1e-9);
+        let next = smoothed_support(&smoothed, rules.to_vec(), 1e-9);
         assert_eq!(next, vec![true, true, true, false, true, false]);
     }
 }
