@@ -10,6 +10,7 @@ mod cpu;
 pub mod error;
 pub mod field;
 mod geometry;
+mod heap;
 pub mod limits;
 pub mod operators;
 pub mod progress;

@@ -61,12 +61,10 @@ pub fn pou_eval(p: &EliminatedProblem, y: &[f64]) -> DualPoint {
     last.par_iter_mut().enumerate().for_each(|(i, v)| {
         *v = -(0..m - 1).map(|j| head[j * nf + i]).sum::<f64>();
     });
-    let w: Vec<f64> =
-        p.w0.par_iter()
-            .zip(x.par_iter())
-            .map(|(a, b)| a + b)
-            .collect();
     let objective = 0.5 * dot(y, &x) + dot(y, &p.w0);
+    // W(Y) = W0 + x, formed in place: at scale each `nf x m` vector is tens of MB.
+    let mut w = x;
+    w.par_iter_mut().zip(&p.w0).for_each(|(v, a)| *v += a);
     // The Lagrangian `E(W) - <Y, W>` at its minimiser W(Y) over the partition-of-unity plane.
     let multiplier_terms = dot(&w, y);
     DualPoint {

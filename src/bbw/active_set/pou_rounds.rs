@@ -212,15 +212,12 @@ pub(super) fn pou_rounds(
         mu.iter_mut().zip(&delta).for_each(|(u, d)| *u += d);
 
         // Multipliers y = A w + g + mu on the zero set (eq. 15 read backwards).
-        let aw = prob.apply_a(&w);
-        let mut y = vec![0.0; nf * m];
+        let mut y = prob.apply_a(&w);
         let mut scale: f64 = 1.0;
         for k in 0..nf * m {
-            let grad = aw[k] + prob.g[k];
+            let grad = y[k] + prob.g[k];
             scale = scale.max(grad.abs());
-            if !support[k] {
-                y[k] = grad + mu[k % nf];
-            }
+            y[k] = if support[k] { 0.0 } else { grad + mu[k % nf] };
         }
         // Certificate: projected w (upper bound), dual at y spread to >= 0 (lower bound). The
         // smoothed weights are feasible too, never higher, and often a tighter upper bound;
