@@ -18,11 +18,10 @@
 //! with one sparse Cholesky factor per column support ([`support_factor`]), preconditioned by
 //! `A / m` (exact when every support is the whole mesh, where `S = m A^{-1}`) ([`pcg`]).
 //! Entries of the support whose weight came out negative leave it, entries off it whose
-//! multiplier `y` came out negative join it, damped and dilated ([`next_support`]), and the
-//! round repeats until no sign is violated (the KKT conditions then hold to round-off)
-//! ([`pou_rounds`]). While the rounds' gap keeps falling, each round's weights are also
-//! smoothed by projected Gauss-Seidel ([`smooth`]), and the smoothed weights name the entries
-//! that stay.
+//! multiplier `y` came out negative join it, damped ([`next_support`]), and the round repeats
+//! until no sign is violated (the KKT conditions then hold to round-off) ([`pou_rounds`]).
+//! Each round's weights are also smoothed by projected Gauss-Seidel ([`smooth`]), and an entry
+//! leaves the support only where neither the smoothed weights nor the sign rules keep it.
 //!
 //! The first support comes from a short run of the paper's L-BFGS on the dual (a duality gap of
 //! [`WARM_GAP`]), its projected weights smoothed as a round's are (with fewer sweeps). Every

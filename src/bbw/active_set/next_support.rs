@@ -25,56 +25,26 @@ impl SignThresholds {
     }
 }
 
-/// Which off-support neighbours a joining entry brings along ([`next_support`]).
-#[derive(Clone, Copy, PartialEq, Eq, Debug)]
-pub(super) enum Dilate {
-    /// None: the joining entries alone.
-    Off,
-    /// The neighbours whose multiplier is below the joiner's violation and whose row would
-    /// join this column anyway (its most negative multiplier is in it).
-    WithinRows,
-    /// The neighbours whose multiplier is below the joiner's violation, in any row.
-    Wide,
-}
-
 /// A round's next support guess ([`next_support`]).
 pub(super) struct NextSupport {
-    /// The support after the sign rules, without dilation (`support[j * nf + i]`).
-    pub plain: Vec<bool>,
-    /// The entries (`j * nf + i`) that dilation adds to `plain`; empty without dilation.
-    pub dilated: Vec<usize>,
+    /// The support after the sign rules (`support[j * nf + i]`).
+    pub next: Vec<bool>,
     /// Sign violations: support entries below `leave_below` (not all of which leave) and
     /// off-support entries below `join_below` (at most one per row joins).
     pub negative: usize,
     pub joined: usize,
 }
 
-impl NextSupport {
-    /// `plain` with the dilated entries.
-    pub fn into_dilated(self) -> Vec<bool> {
-        let mut next = self.plain;
-        self.dilated.iter().for_each(|&k| next[k] = true);
-        next
-    }
-}
-
-/// The next support guess from a round's weights `w` and multipliers `y` (all `nf x m`), with
-/// and without dilation in one pass (a round that dilates may be undone, below).
+/// The next support guess from a round's weights `w` and multipliers `y` (all `nf x m`).
 ///
-/// Two rules keep the supports' edges from crawling, as plain primal-dual active sets do on
-/// the biharmonic operator (not an M-matrix), and a third keeps the supports from
-/// overgrowing:
+/// One rule keeps the supports' edges from crawling, as plain primal-dual active sets do on
+/// the biharmonic operator (not an M-matrix), and another keeps the supports from
+/// overgrowing (the smoother of the rounds settles the rest of the edges, `pou_rounds`):
 /// - A support that reaches too far overshoots: its weights dip negative over a band wider than
 ///   the excess, and dropping the whole band cuts into the optimal support, which then creeps
 ///   back one neighbourhood per round. So only the outer half of a negative band leaves (entries
 ///   no farther, in steps of the graph of `A`, from the support's edge than from its
 ///   non-negative part), plus the most negative entry of each neighbourhood, which opens holes.
-/// - A support that falls short only sees negative multipliers right at its edge, so it grows by
-///   one neighbourhood per round. When `dilate` is not [`Dilate::Off`] (the rounds crawl),
-///   the off-support neighbours of each joining entry whose multiplier is below the joiner's
-///   violation join too: with [`Dilate::WithinRows`] only those whose row's most negative
-///   multiplier is in this column (the next rule, which a wide dilation ignores). Dilating
-///   every round makes some supports cycle, hence the switch.
 /// - A row joins one column per round: the one whose multiplier is most negative
 ///   ([`row_joiners`]).
 pub(super) fn next_support(
@@ -83,12 +53,11 @@ pub(super) fn next_support(
     w: &[f64],
     y: &[f64],
     th: SignThresholds,
-    dilate: Dilate,
     nf: usize,
 ) -> NextSupport {
     let mut next = support.to_vec();
     let joiner = row_joiners(support, y, th.join_below, nf);
-    let per_column: Vec<(usize, usize, Vec<usize>)> = next
+    let per_column: Vec<(usize, usize)> = next
         .par_chunks_mut(nf)
         .zip(support.par_chunks(nf))
         .zip(w.par_chunks(nf).zip(y.par_chunks(nf)))
@@ -99,7 +68,7 @@ pub(super) fn next_support(
             let band: Vec<usize> = (0..nf).filter(|&i| leaving(i)).collect();
             let d_edge = band_distance(a, &band, leaving, |i| !sup[i], nf);
             let d_kept = band_distance(a, &band, leaving, |i| sup[i] && !leaving(i), nf);
-            let (mut negative, mut joined, mut dilated) = (0, 0, Vec::new());
+            let (mut negative, mut joined) = (0, 0);
             for i in 0..nf {
                 if leaving(i) {
                     negative += 1;
@@ -110,36 +79,17 @@ pub(super) fn next_support(
                     }
                 } else if !sup[i] && yc[i] < th.join_below {
                     joined += 1;
-                    if joiner[i] != col {
-                        continue;
-                    }
-                    nx[i] = true;
-                    if dilate == Dilate::Off {
-                        continue;
-                    }
-                    for &j in a.symbolic().row_idx_of_col_raw(i) {
-                        let row_agrees = dilate == Dilate::Wide || joiner[j] == col;
-                        if !sup[j] && yc[j] < -yc[i] && row_agrees {
-                            dilated.push(col * nf + j);
-                        }
-                    }
+                    nx[i] |= joiner[i] == col;
                 }
             }
-            (negative, joined, dilated)
+            (negative, joined)
         })
         .collect();
-    let mut step = NextSupport {
-        plain: next,
-        dilated: Vec::new(),
-        negative: 0,
-        joined: 0,
-    };
-    for (negative, joined, dilated) in per_column {
-        step.negative += negative;
-        step.joined += joined;
-        step.dilated.extend(dilated);
+    NextSupport {
+        next,
+        negative: per_column.iter().map(|c| c.0).sum(),
+        joined: per_column.iter().map(|c| c.1).sum(),
     }
-    step
 }
 
 /// For each row, the off-support column whose multiplier is most negative below `join_below`
@@ -149,8 +99,7 @@ pub(super) fn next_support(
 /// support is wrong, `mu_i` is off and `y_ij = (A w + g)_ij + mu_i` comes out negative in
 /// most of its columns at once, though only a few of them belong to the optimal support. The
 /// most negative one is the likeliest; joining them all overgrows the supports, and the next
-/// rounds peel them off again at the cost of a larger factor each. The neighbours a wide
-/// dilation brings along ([`next_support`]) are not limited per row.
+/// rounds peel them off again at the cost of a larger factor each.
 fn row_joiners(support: &[bool], y: &[f64], join_below: f64, nf: usize) -> Vec<usize> {
     let m = support.len() / nf.max(1);
     (0..nf)
@@ -243,23 +192,13 @@ mod tests {
             .collect();
         let mut y = vec![0.0; 14];
         y[10] = -1.0; // wants to join
-        y[11] = 0.5; // below the joiner's violation: joins too when dilating
-        y[12] = 2.0;
+        y[11] = 0.5; // no violation: stays out
         let th = SignThresholds::new(1e-6, 1.0);
-        let step = next_support(&a, &support, &w, &y, th, Dilate::Off, 14);
+        let step = next_support(&a, &support, &w, &y, th, 14);
         assert_eq!((step.negative, step.joined), (4, 1));
-        let kept: Vec<usize> = (0..14).filter(|&i| step.plain[i]).collect();
+        let kept: Vec<usize> = (0..14).filter(|&i| step.next[i]).collect();
         // 8 and 9 are no farther from the edge than from the positive part; 6 and 7 stay.
         assert_eq!(kept, vec![0, 1, 2, 3, 4, 5, 6, 7, 10]);
-        let step = next_support(&a, &support, &w, &y, th, Dilate::Wide, 14);
-        // The plain support is the one without dilation.
-        assert!(step.plain[10] && !step.plain[11]);
-        let next = step.into_dilated();
-        assert!(next[10] && next[11] && !next[12]);
-        // Row 11 has no negative multiplier, so no column of its own to join: only a wide
-        // dilation brings it along.
-        let next = next_support(&a, &support, &w, &y, th, Dilate::WithinRows, 14).into_dilated();
-        assert!(next[10] && !next[11] && !next[12]);
     }
 
     #[test]
@@ -276,11 +215,11 @@ mod tests {
             row_joiners(&support, &y, th.join_below, 4),
             vec![none, 0, 1, none]
         );
-        let step = next_support(&a, &support, &w, &y, th, Dilate::Off, 4);
+        let step = next_support(&a, &support, &w, &y, th, 4);
         // Every violation counts (the KKT test), but each row takes one column.
         assert_eq!((step.negative, step.joined), (0, 4));
         assert_eq!(
-            step.plain,
+            step.next,
             vec![true, true, false, false, false, false, true, true]
         );
     }

@@ -8,7 +8,7 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use super::next_support::{next_support, Dilate, SignThresholds};
+use super::next_support::{next_support, SignThresholds};
 use super::pcg::{pcg, row_sums_minus_one};
 use super::smooth::{gauss_seidel_pou, SweepPlan};
 use super::spread::spread_negative;
@@ -32,12 +32,6 @@ const CG_TOL_SIGNS: f64 = 1.0;
 /// CG tolerance relative to `tol` once every sign holds: rows are renormalised afterwards, so a
 /// tighter residual changes nothing.
 const CG_TOL_FINAL: f64 = 1e-2;
-/// A round whose gap fell by less than this factor crawls, and the next one dilates its joins
-/// ([`next_support`]).
-const CRAWL: f64 = 4.0;
-/// Rounds without dilation after a dilated round raised the upper bound; twice as many after
-/// each further such round.
-const DILATION_PAUSE: usize = 3;
 
 /// Projected Gauss-Seidel sweeps over a round's projected weights ([`gauss_seidel_pou`]):
 /// each sweep moves the supports' edges by about a ring of `A`, and a round's exact solve
@@ -47,13 +41,8 @@ const SMOOTH_SWEEPS: usize = 30;
 /// Sweeps over the warm start's projected weights before the first support is read off them:
 /// 30 took as many rounds as 10 (docs/solver.md's WARM_GAP row).
 const FIRST_SWEEPS: usize = 10;
-/// The rounds run the smoother and follow its support until this many rounds' own gaps did
-/// not fall; after that its upper bound saved no round (hand-403, big2d, the tubes of `bench
-/// bbw`, the armadillos of `bench scale`).
-const SMOOTHER_RISES: usize = 2;
-
-/// The next support while the rounds follow the smoother: the entries whose smoothed weight is
-/// above `above`, and those the sign rules keep or join (`rules`, [`next_support`]).
+/// The next support: the entries whose smoothed weight is above `above`, and those the sign
+/// rules keep or join (`rules`, [`next_support`]).
 ///
 /// The smoothed weights settle the zero set near the supports' edges, which the sign rules
 /// move a ring per round; where they are below `above` (the solve's `tol`) they are the
@@ -61,7 +50,10 @@ const SMOOTHER_RISES: usize = 2;
 /// only where both drop it. The smoother alone drops whole negative bands, where the projected
 /// weights are 0 and the sweeps keep them there, and so cuts into the optimal support as the
 /// sign rules' outer-half rule is there to prevent: on the 85k-vertex armadillo of `bench
-/// scale`, 4 seeds in 10 then took 15-16 rounds, where both take 10-12 (docs/solver.md).
+/// scale`, 4 seeds in 10 then took 15-16 rounds, where both take 10-12 (docs/solver.md). Both
+/// decide in every round: near the optimum the smoother's support alone cycled with the rules'
+/// joins, and the rounds had to leave it; the union did not, and following it to the end took
+/// the 2D pants 40 and 33 rounds against 51 and 36, the other cases the same.
 fn smoothed_support(smoothed: &[f64], mut rules: Vec<bool>, above: f64) -> Vec<bool> {
     rules
         .iter_mut()
@@ -71,28 +63,13 @@ fn smoothed_support(smoothed: &[f64], mut rules: Vec<bool>, above: f64) -> Vec<b
 }
 
 /// The rounds' state, kept across an L-BFGS intermission: the support guess
-/// (`support[j * nf + i]`), the partition-of-unity multiplier, the CG tolerance and what
-/// decides the dilation of joins ([`next_support`]), whether the next support follows the
-/// smoother ([`smoothed_support`]): how many rounds' gaps have not fallen, and the smoother's
-/// plan of `A`'s rows.
+/// (`support[j * nf + i]`), the partition-of-unity multiplier, the CG tolerance and the
+/// smoother's plan of `A`'s rows.
 pub(super) struct RoundsState {
     support: Vec<bool>,
     mu: Vec<f64>,
     cg_tol: f64,
-    dilation: Dilation,
-    smoother_rises: usize,
     sweep_plan: SweepPlan,
-}
-
-/// The last round's own bounds, whether its joins were dilated, and the pause of dilation: none
-/// before round `paused_until`, and the length of the next pause.
-#[derive(Clone, Copy)]
-struct Dilation {
-    paused_until: usize,
-    next_pause: usize,
-    last_dilated: bool,
-    last_gap: f64,
-    last_upper: f64,
 }
 
 impl RoundsState {
@@ -119,14 +96,6 @@ impl RoundsState {
             support,
             mu: vec![0.0; nf],
             cg_tol: CG_TOL_FIRST,
-            dilation: Dilation {
-                paused_until: 0,
-                next_pause: DILATION_PAUSE,
-                last_dilated: false,
-                last_gap: f64::INFINITY,
-                last_upper: f64::INFINITY,
-            },
-            smoother_rises: 0,
             sweep_plan,
         }
     }
@@ -147,8 +116,6 @@ pub(super) fn pou_rounds(
     let mut gap_watch = StallWatch::new(best.relative_gap());
     let mut own_bounds = OwnBounds::new();
     let budget = opts.max_iter.min(MAX_ROUNDS).saturating_sub(info.rounds);
-    // After a dilated round: the support and `mu` the round would have gone on with undilated.
-    let mut undilated: Option<(Vec<bool>, Vec<f64>)> = None;
     // The last round's dual point, for L-BFGS when the next round's factors do not fit.
     let mut last_dual: Option<Vec<f64>> = None;
     for _ in 0..budget {
@@ -156,8 +123,6 @@ pub(super) fn pou_rounds(
             support,
             mu,
             cg_tol,
-            dilation,
-            smoother_rises,
             sweep_plan,
         } = &mut *state;
         let Some(factors) = factor_within_limit(prob, opts, support, info)? else {
@@ -220,21 +185,17 @@ pub(super) fn pou_rounds(
             y[k] = if support[k] { 0.0 } else { grad + mu[k % nf] };
         }
         // Certificate: projected w (upper bound), dual at y spread to >= 0 (lower bound). The
-        // smoothed weights are feasible too, never higher, and often a tighter upper bound;
-        // they are computed only while they decide the next support.
+        // smoothed weights are feasible too, never higher, and often a tighter upper bound.
         let feasible = project_pou(&w, nf, m);
         let upper = prob.energy(&feasible);
         let t = Instant::now();
-        let smoothed = (*smoother_rises < SMOOTHER_RISES)
-            .then(|| gauss_seidel_pou(sweep_plan, &prob.g, &feasible, nf, m, SMOOTH_SWEEPS));
+        let smoothed = gauss_seidel_pou(sweep_plan, &prob.g, &feasible, nf, m, SMOOTH_SWEEPS);
         info.time_smooth += t.elapsed().as_secs_f64();
         best.offer(&w, feasible, upper);
-        if let Some(smoothed) = &smoothed {
-            let energy = prob.energy(smoothed);
-            if energy < best.upper {
-                // Its raw extremes are those of the round's weights it was smoothed from.
-                best.offer(&w, smoothed.clone(), energy);
-            }
+        let energy = prob.energy(&smoothed);
+        if energy < best.upper {
+            // Its raw extremes are those of the round's weights it was smoothed from.
+            best.offer(&w, smoothed.clone(), energy);
         }
         // The dual's own recovered W(Y) is not offered as a primal candidate: it is smooth but
         // nowhere exactly zero, and once projected can win on energy by a hair while sitting
@@ -254,60 +215,10 @@ pub(super) fn pou_rounds(
         if best.relative_gap() <= opts.tol {
             return Ok(Outcome::Done);
         }
-        // A gap that fell by less than a factor CRAWL in a round means the supports' edges
-        // crawl: the joins then bring their neighbourhoods along. A dilated round that raised
-        // the upper bound overshot: dilating again at once makes the supports cycle, so it
-        // pauses, longer each time. Never dilating again leaves far-reaching supports (few
-        // bones: every weight positive on most of the mesh) to crawl a ring per round. If the
-        // overshoot also widened the gap, its weights dip negative over wide bands, and
-        // going on from it costs more rounds than it saves: the round is undone.
-        // Where the smoothed weights alone decided what leaves, the smoother dropped entries
-        // of tiny weight that the sign rules then joined again, and near the optimum the two
-        // cycled (a 7.7k-vertex armadillo with 20 handles stalled at a gap of 7e-7). From the
-        // second round whose own gap did not fall, the sign rules alone decide (from the
-        // first, the 2D pants took 107 rounds, not 63).
-        if own_gap >= dilation.last_gap {
-            *smoother_rises += 1;
-        }
-        let follow = smoothed
-            .as_ref()
-            .filter(|_| *smoother_rises < SMOOTHER_RISES);
-        let with_smoother = |rules: Vec<bool>| match follow {
-            Some(smoothed) => smoothed_support(smoothed, rules, opts.tol),
-            None => rules,
-        };
-        if dilation.last_dilated && upper > dilation.last_upper {
-            dilation.paused_until = round.saturating_add(dilation.next_pause);
-            dilation.next_pause = dilation.next_pause.saturating_mul(2);
-            let widened = own_gap > dilation.last_gap;
-            if let Some((plain, plain_mu)) = undilated.take().filter(|_| widened) {
-                *support = plain;
-                *mu = plain_mu;
-                dilation.last_dilated = false;
-                continue;
-            }
-        }
-        let crawls = round >= dilation.paused_until && own_gap > dilation.last_gap / CRAWL;
-        // While the smoother leads, a dilated join brings along only neighbours whose row
-        // would join this column anyway: with every neighbour below the joiner's violation the
-        // 3D supports overgrew (armadillo 85k: the largest round's factors 1.27x the last
-        // round's; 128k: over memory_limit), and the rows' other columns are the smoother's to
-        // settle. After it, the far-reaching supports of few bones need the wide dilation (2D
-        // pants: 116 rounds with dilation within rows throughout, 72 with the switch).
-        let dilate = match (crawls, follow.is_some()) {
-            (false, _) => Dilate::Off,
-            (true, true) => Dilate::WithinRows,
-            (true, false) => Dilate::Wide,
-        };
-        dilation.last_dilated = crawls;
-        dilation.last_gap = own_gap;
-        dilation.last_upper = upper;
         let thresholds = SignThresholds::new(opts.tol, scale);
-        let step = next_support(&prob.a, support, &w, &y, thresholds, dilate, nf);
+        let step = next_support(&prob.a, support, &w, &y, thresholds, nf);
         let exact = step.negative == 0 && step.joined == 0;
-        let plain = crawls.then(|| step.plain.clone());
-        let next = with_smoother(step.into_dilated());
-        undilated = plain.map(|plain| (with_smoother(plain), mu.clone()));
+        let next = smoothed_support(&smoothed, step.next, opts.tol);
         if exact && *cg_tol <= CG_TOL_FINAL * opts.tol {
             // Every KKT sign holds and PoU to round-off: this is the optimum; the gap is as
             // small as floating point allows.
