@@ -86,8 +86,10 @@ fn lower_block(a: &Csc, idx: &[usize]) -> Csc {
     col_ptr.push(0);
     for &j in idx {
         let rows = a.symbolic().row_idx_of_col_raw(j);
-        for (&i, &v) in rows.iter().zip(a.val_of_col(j)) {
-            if i >= j && pos[i] != usize::MAX {
+        // The lower triangle: the rows from j on.
+        let from = rows.partition_point(|&i| i < j);
+        for (&i, &v) in rows[from..].iter().zip(&a.val_of_col(j)[from..]) {
+            if pos[i] != usize::MAX {
                 row_idx.push(pos[i]);
                 val.push(v);
             }
