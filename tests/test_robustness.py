@@ -194,7 +194,9 @@ def _mesher_children() -> list[str]:
 
 @pytest.mark.skipif(not os.path.isdir("/proc"), reason="reads child processes from /proc")
 def test_ctrl_c_stops_a_mesher_child():
-    # Ctrl-C during the looping Triangle run (seconds until its memory bound) kills the child
+    # Ctrl-C during the looping Triangle run (seconds until its memory bound) kills the child;
+    # Python's own handler, in case the runner was started with SIGINT ignored
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     timer = threading.Timer(0.5, os.kill, (os.getpid(), signal.SIGINT))
     timer.start()
     try:
@@ -202,6 +204,7 @@ def test_ctrl_c_stops_a_mesher_child():
             skinrs.mesh_with_skeleton(LOOPING_OUTLINE, None, LOOPING_C, [[0, 1], [1, 2]])
     finally:
         timer.cancel()
+        signal.signal(signal.SIGINT, previous)
     assert _mesher_children() == []
 
 
