@@ -27,6 +27,44 @@ fn project(opts: &BbwOptions, w: &[f64], nf: usize, m: usize) -> Vec<f64> {
     }
 }
 
+/// An early stop for a warm start, whose use is the support it names: once the duality gap is
+/// at most `gap` and the projected iterate's support (its entries above `above`) differs from
+/// the previous gap check's in at most a `change` fraction of its entries, further iterations
+/// would hand the rounds the same first support.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct SettledSupport {
+    pub gap: f64,
+    pub above: f64,
+    pub change: f64,
+}
+
+/// The support of the projected iterate at the previous gap check, for [`SettledSupport`].
+struct SupportWatch {
+    rule: SettledSupport,
+    previous: Vec<bool>,
+}
+
+impl SupportWatch {
+    /// Whether the support of `w` (projected weights) has settled; remembers it for the next
+    /// check.
+    fn settled(&mut self, w: &[f64]) -> bool {
+        let above = self.rule.above;
+        let support: Vec<bool> = w.par_iter().map(|&x| x > above).collect();
+        let size = support.par_iter().filter(|&&s| s).count();
+        let changed = if self.previous.len() == support.len() {
+            support
+                .par_iter()
+                .zip(self.previous.par_iter())
+                .filter(|(a, b)| a != b)
+                .count()
+        } else {
+            usize::MAX
+        };
+        self.previous = support;
+        (changed as f64) <= self.rule.change * size as f64
+    }
+}
+
 /// The paper's solver: L-BFGS on the dual in `U` with `Y = U o U`, from `start`, until the
 /// duality gap of the best projected iterate is at most `tol` (relative) or `opts.max_iter`.
 /// Adds its iterations and evaluations to `info`; returns the last iterate `U`.
@@ -34,6 +72,21 @@ pub(crate) fn run_lbfgs(
     prob: &EliminatedProblem,
     opts: &BbwOptions,
     tol: f64,
+    u: Vec<f64>,
+    best: &mut CertifiedBounds,
+    info: &mut BbwInfo,
+    progress: &mut dyn Progress,
+) -> SkinResult<Vec<f64>> {
+    run_lbfgs_settling(prob, opts, tol, None, u, best, info, progress)
+}
+
+/// [`run_lbfgs`] that also stops where `settled` says the support no longer moves.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn run_lbfgs_settling(
+    prob: &EliminatedProblem,
+    opts: &BbwOptions,
+    tol: f64,
+    settled: Option<SettledSupport>,
     mut u: Vec<f64>,
     best: &mut CertifiedBounds,
     info: &mut BbwInfo,
@@ -49,6 +102,10 @@ pub(crate) fn run_lbfgs(
     };
     let last: RefCell<Option<DualPoint>> = RefCell::new(None);
     let mut evaluations = 0;
+    let mut watch = settled.map(|rule| SupportWatch {
+        rule,
+        previous: Vec::new(),
+    });
     let fg = |u: &[f64], grad: &mut [f64]| -> f64 {
         evaluations += 1;
         let y: Vec<f64> = u.par_iter().map(|v| v * v).collect();
@@ -74,24 +131,26 @@ pub(crate) fn run_lbfgs(
         // The certificate costs a projection and two energy evaluations (the projected primal's
         // and the dual's lower bound); checking it every few iterations keeps the stop at most
         // GAP_EVERY - 1 iterations late.
+        let mut stop = false;
         if it % GAP_EVERY == 0 {
             // Taken, so that the certificate after the loop is not computed again for it.
             let dp = last.borrow_mut().take();
             let dp = dp.expect("objective evaluated before monitor");
             let feasible = project(opts, &dp.w, nf, m);
             let upper = prob.energy(&feasible);
+            let settled_gap = watch
+                .as_mut()
+                .and_then(|w| w.settled(&feasible).then_some(w.rule.gap));
             best.update(&dp, dp.lower_bound(prob), feasible, upper);
+            let gap = best.relative_gap();
+            stop = gap <= tol || settled_gap.is_some_and(|g| gap <= g);
         }
         progress.report(Event {
             stage: "dual",
             iteration: it,
             value: best.relative_gap(),
         })?;
-        Ok(if it % GAP_EVERY == 0 && best.relative_gap() <= tol {
-            Step::Stop
-        } else {
-            Step::Continue
-        })
+        Ok(if stop { Step::Stop } else { Step::Continue })
     })?;
     // Certify the final iterate too if the loop ended between two gap checks.
     if let Some(dp) = last.borrow_mut().take() {
@@ -114,4 +173,44 @@ pub(crate) fn random_start(nf: usize, m: usize, blocks: usize, seed: u64) -> Vec
         col.iter_mut().for_each(|v| *v *= scale);
     }
     u
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn watch() -> SupportWatch {
+        SupportWatch {
+            rule: SettledSupport {
+                gap: 6e-3,
+                above: 0.1,
+                change: 0.05,
+            },
+            previous: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn a_support_settles_only_once_it_has_been_seen_twice() {
+        let w: Vec<f64> = (0..100).map(|i| f64::from(i % 2)).collect();
+        let mut watch = watch();
+        assert!(!watch.settled(&w), "no previous support to compare with");
+        assert!(watch.settled(&w));
+    }
+
+    #[test]
+    fn a_support_settles_when_at_most_the_fraction_of_its_entries_changed() {
+        // 50 entries above 0.1; 2 changed is 4 % of them, 3 is 6 %.
+        let w: Vec<f64> = (0..100).map(|i| f64::from(i % 2)).collect();
+        let mut two = w.clone();
+        two[0] = 1.0;
+        two[1] = 0.05;
+        let mut three = two.clone();
+        three[2] = 0.2;
+        let mut watch = watch();
+        watch.settled(&w);
+        assert!(watch.settled(&two));
+        watch.settled(&w);
+        assert!(!watch.settled(&three));
+    }
 }
