@@ -24,7 +24,8 @@
 //! leaves the support only where neither the smoothed weights nor the sign rules keep it.
 //!
 //! The first support comes from a short run of the paper's L-BFGS on the dual (a duality gap of
-//! [`WARM_GAP`]), its projected weights smoothed as a round's are (with fewer sweeps). Every
+//! [`WARM_GAP`], or twice that once the support stops moving, [`SETTLED`]), its projected
+//! weights smoothed as a round's are (with fewer sweeps). Every
 //! round is certified like the L-BFGS iterates: the projected weights give an upper bound on
 //! the optimal energy, the dual (eq. 12) at `y` made non-negative by
 //! [`spread::spread_negative`] a lower bound, and the solve stops once their relative gap is
