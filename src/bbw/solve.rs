@@ -7,7 +7,7 @@ use ndarray::Array2;
 use super::bounds::CertifiedBounds;
 use super::options::{BbwInfo, BbwOptions, Solver};
 use super::problem::EliminatedProblem;
-use super::squared_lbfgs::{random_start, run_lbfgs};
+use super::squared_lbfgs::{random_start, run_lbfgs, LbfgsStop};
 use crate::error::SkinResult;
 use crate::invalid;
 use crate::progress::Progress;
@@ -44,7 +44,8 @@ pub fn bbw_dual(
             Solver::LbfgsSquared => {
                 let t = Instant::now();
                 let start = random_start(prob.nf(), prob.m, opts.dual_blocks(), opts.seed);
-                run_lbfgs(prob, opts, opts.tol, start, &mut best, &mut info, progress)?;
+                let stop = LbfgsStop::at_gap(opts.tol);
+                run_lbfgs(prob, opts, stop, start, &mut best, &mut info, progress)?;
                 info.time_lbfgs = t.elapsed().as_secs_f64();
             }
             Solver::ActiveSet => {

@@ -65,28 +65,28 @@ impl SupportWatch {
     }
 }
 
-/// The paper's solver: L-BFGS on the dual in `U` with `Y = U o U`, from `start`, until the
-/// duality gap of the best projected iterate is at most `tol` (relative) or `opts.max_iter`.
-/// Adds its iterations and evaluations to `info`; returns the last iterate `U`.
+/// When [`run_lbfgs`] stops: at a relative duality gap of `tol`, or earlier where `settled`
+/// says the support the iterate names no longer moves (a warm start's).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct LbfgsStop {
+    pub tol: f64,
+    pub settled: Option<SettledSupport>,
+}
+
+impl LbfgsStop {
+    /// Stops at a relative duality gap of `tol` only.
+    pub fn at_gap(tol: f64) -> Self {
+        LbfgsStop { tol, settled: None }
+    }
+}
+
+/// The paper's solver: L-BFGS on the dual in `U` with `Y = U o U`, from `u`, until the duality
+/// gap of the best projected iterate is at most `stop.tol` (relative), `stop.settled` holds, or
+/// `opts.max_iter`. Adds its iterations and evaluations to `info`; returns the last iterate `U`.
 pub(crate) fn run_lbfgs(
     prob: &EliminatedProblem,
     opts: &BbwOptions,
-    tol: f64,
-    u: Vec<f64>,
-    best: &mut CertifiedBounds,
-    info: &mut BbwInfo,
-    progress: &mut dyn Progress,
-) -> SkinResult<Vec<f64>> {
-    run_lbfgs_settling(prob, opts, tol, None, u, best, info, progress)
-}
-
-/// [`run_lbfgs`] that also stops where `settled` says the support no longer moves.
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn run_lbfgs_settling(
-    prob: &EliminatedProblem,
-    opts: &BbwOptions,
-    tol: f64,
-    settled: Option<SettledSupport>,
+    stop: LbfgsStop,
     mut u: Vec<f64>,
     best: &mut CertifiedBounds,
     info: &mut BbwInfo,
@@ -102,7 +102,7 @@ pub(crate) fn run_lbfgs_settling(
     };
     let last: RefCell<Option<DualPoint>> = RefCell::new(None);
     let mut evaluations = 0;
-    let mut watch = settled.map(|rule| SupportWatch {
+    let mut watch = stop.settled.map(|rule| SupportWatch {
         rule,
         previous: Vec::new(),
     });
@@ -131,7 +131,7 @@ pub(crate) fn run_lbfgs_settling(
         // The certificate costs a projection and two energy evaluations (the projected primal's
         // and the dual's lower bound); checking it every few iterations keeps the stop at most
         // GAP_EVERY - 1 iterations late.
-        let mut stop = false;
+        let mut done = false;
         if it % GAP_EVERY == 0 {
             // Taken, so that the certificate after the loop is not computed again for it.
             let dp = last.borrow_mut().take();
@@ -143,14 +143,14 @@ pub(crate) fn run_lbfgs_settling(
                 .and_then(|w| w.settled(&feasible).then_some(w.rule.gap));
             best.update(&dp, dp.lower_bound(prob), feasible, upper);
             let gap = best.relative_gap();
-            stop = gap <= tol || settled_gap.is_some_and(|g| gap <= g);
+            done = gap <= stop.tol || settled_gap.is_some_and(|g| gap <= g);
         }
         progress.report(Event {
             stage: "dual",
             iteration: it,
             value: best.relative_gap(),
         })?;
-        Ok(if stop { Step::Stop } else { Step::Continue })
+        Ok(if done { Step::Stop } else { Step::Continue })
     })?;
     // Certify the final iterate too if the loop ended between two gap checks.
     if let Some(dp) = last.borrow_mut().take() {

@@ -53,7 +53,7 @@ use self::stall::{Outcome, Watch, STALL_ROUNDS};
 use super::bounds::CertifiedBounds;
 use super::options::{BbwInfo, BbwOptions};
 use super::problem::EliminatedProblem;
-use super::squared_lbfgs::{random_start, run_lbfgs, run_lbfgs_settling, SettledSupport};
+use super::squared_lbfgs::{random_start, run_lbfgs, LbfgsStop, SettledSupport};
 use crate::error::SkinResult;
 use crate::progress::Progress;
 
@@ -98,10 +98,13 @@ fn solve_with_stall(
     let (nf, m) = (prob.nf(), prob.m);
     let t = Instant::now();
     let start = random_start(nf, m, opts.dual_blocks(), opts.seed);
-    let warm = WARM_GAP.max(opts.tol);
-    // Partition of unity only: the box rounds of the 7.7k armadillo took one more (66) with it.
-    let settled = (opts.partition_of_unity && SETTLED.gap > opts.tol).then_some(SETTLED);
-    let u_warm = run_lbfgs_settling(prob, opts, warm, settled, start, best, info, progress)?;
+    let stop = LbfgsStop {
+        tol: WARM_GAP.max(opts.tol),
+        // Partition of unity only: the box rounds of the 7.7k armadillo took one more (66) with
+        // it.
+        settled: (opts.partition_of_unity && SETTLED.gap > opts.tol).then_some(SETTLED),
+    };
+    let u_warm = run_lbfgs(prob, opts, stop, start, best, info, progress)?;
     info.time_lbfgs = t.elapsed().as_secs_f64();
     if best.relative_gap() <= opts.tol {
         return Ok(());
@@ -159,7 +162,8 @@ fn hand_over(
             info.memory_fallback = true;
             info.fallbacks += 1;
             let t = Instant::now();
-            run_lbfgs(prob, opts, opts.tol, u_warm, best, info, progress)?;
+            let stop = LbfgsStop::at_gap(opts.tol);
+            run_lbfgs(prob, opts, stop, u_warm, best, info, progress)?;
             info.time_lbfgs += t.elapsed().as_secs_f64();
             Ok(())
         }
@@ -186,7 +190,8 @@ fn fallback_lbfgs(
         ..opts.clone()
     };
     let t = Instant::now();
-    run_lbfgs(prob, &capped, opts.tol, u, best, info, progress)?;
+    let stop = LbfgsStop::at_gap(opts.tol);
+    run_lbfgs(prob, &capped, stop, u, best, info, progress)?;
     info.time_lbfgs += t.elapsed().as_secs_f64();
     Ok(())
 }
