@@ -41,25 +41,30 @@ const SMOOTH_SWEEPS: usize = 30;
 /// Sweeps over the warm start's projected weights before the first support is read off them:
 /// 30 took as many rounds as 10 (docs/solver.md's WARM_GAP row).
 const FIRST_SWEEPS: usize = 10;
-/// The next support: the entries whose smoothed weight is above `above`, and those the sign
-/// rules keep or join (`rules`, [`next_support`]).
+/// The next support: the entries whose smoothed weight is above the solve's `tol`
+/// (`smoothed_above`), and those the sign rules keep or join (`rules`, [`next_support`]).
 ///
-/// The smoothed weights settle the zero set near the supports' edges, which the sign rules
-/// move a ring per round; where they are below `above` (the solve's `tol`) they are the
-/// smoother's slowly decaying tails, which at 0 overgrow the supports in 2D. An entry leaves
-/// only where both drop it. The smoother alone drops whole negative bands, where the projected
-/// weights are 0 and the sweeps keep them there, and so cuts into the optimal support as the
-/// sign rules' outer-half rule is there to prevent: on the 85k-vertex armadillo of `bench
-/// scale`, 4 seeds in 10 then took 15-16 rounds, where both take 10-12 (docs/solver.md). Both
-/// decide in every round: near the optimum the smoother's support alone cycled with the rules'
-/// joins, and the rounds had to leave it; the union did not, and following it to the end took
-/// the 2D pants 40 and 33 rounds against 51 and 36, the other cases the same.
-fn smoothed_support(smoothed: &[f64], mut rules: Vec<bool>, above: f64) -> Vec<bool> {
+/// The smoothed weights settle the zero set near the supports' edges, which the sign rules move
+/// a ring per round; where they are below the solve's `tol` they are the smoother's slowly
+/// decaying tails, which at 0 overgrow the supports in 2D. An entry leaves only where both drop
+/// it. The smoother alone drops whole negative bands, where the projected weights are 0 and the
+/// sweeps keep them there, and so cuts into the optimal support as the sign rules' outer-half
+/// rule is there to prevent: on the 85k-vertex armadillo of `bench scale`, 4 seeds in 10 then
+/// took 15-16 rounds, where both take 10-12 (docs/solver.md). Both decide in every round: near
+/// the optimum the smoother's support alone cycled with the rules' joins, and the rounds had to
+/// leave it; the union did not, and following it to the end took the 2D pants 40 and 33 rounds
+/// against 51 and 36, the other cases the same.
+fn smoothed_support(smoothed_above: &[bool], mut rules: Vec<bool>) -> Vec<bool> {
     rules
         .iter_mut()
-        .zip(smoothed)
-        .for_each(|(kept, &x)| *kept |= x > above);
+        .zip(smoothed_above)
+        .for_each(|(kept, &s)| *kept |= s);
     rules
+}
+
+/// Which entries of `w` are above `threshold`.
+fn above(w: &[f64], threshold: f64) -> Vec<bool> {
+    w.par_iter().map(|&x| x > threshold).collect()
 }
 
 /// The rounds' state, kept across an L-BFGS intermission: the support guess
@@ -175,6 +180,8 @@ pub(super) fn pou_rounds(
         info.time_cg += t.elapsed().as_secs_f64();
         info.cg_iterations += iters;
         mu.iter_mut().zip(&delta).for_each(|(u, d)| *u += d);
+        // The certificate's vectors need not sit on top of the round's factors in memory.
+        drop(factors);
 
         // Multipliers y = A w + g + mu on the zero set (eq. 15 read backwards).
         let mut y = prob.apply_a(&w);
@@ -192,10 +199,12 @@ pub(super) fn pou_rounds(
         let smoothed = gauss_seidel_pou(sweep_plan, &prob.g, &feasible, nf, m, SMOOTH_SWEEPS);
         info.time_smooth += t.elapsed().as_secs_f64();
         best.offer(&w, feasible, upper);
+        // What the next support needs of the smoothed weights, so that they can move to `best`.
+        let smoothed_above = above(&smoothed, opts.tol);
         let energy = prob.energy(&smoothed);
         if energy < best.upper {
             // Its raw extremes are those of the round's weights it was smoothed from.
-            best.offer(&w, smoothed.clone(), energy);
+            best.offer(&w, smoothed, energy);
         }
         // The dual's own recovered W(Y) is not offered as a primal candidate: it is smooth but
         // nowhere exactly zero, and once projected can win on energy by a hair while sitting
@@ -218,7 +227,7 @@ pub(super) fn pou_rounds(
         let thresholds = SignThresholds::new(opts.tol, scale);
         let step = next_support(&prob.a, support, &w, &y, thresholds, nf);
         let exact = step.negative == 0 && step.joined == 0;
-        let next = smoothed_support(&smoothed, step.next, opts.tol);
+        let next = smoothed_support(&smoothed_above, step.next);
         if exact && *cg_tol <= CG_TOL_FINAL * opts.tol {
             // Every KKT sign holds and PoU to round-off: this is the optimum; the gap is as
             // small as floating point allows.
@@ -252,14 +261,15 @@ pub(super) fn pou_rounds(
 
 #[cfg(test)]
 mod tests {
-    use super::smoothed_support;
+    use super::{above, smoothed_support};
 
     #[test]
     fn an_entry_leaves_only_where_smoother_and_rules_both_drop_it() {
-        // Entries: smoothed above / at / below `above`, crossed with kept or dropped by the rules.
+        // Entries: smoothed above / at / below the threshold, crossed with kept or dropped by the
+        // rules.
         let smoothed = [2e-9, 2e-9, 1e-9, 1e-9, 0.0, 0.0];
         let rules = [true, false, true, false, true, false];
-        let next = smoothed_support(&smoothed, rules.to_vec(), 1e-9);
+        let next = smoothed_support(&above(&smoothed, 1e-9), rules.to_vec());
         assert_eq!(next, vec![true, true, true, false, true, false]);
     }
 }
