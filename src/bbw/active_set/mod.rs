@@ -100,8 +100,7 @@ fn solve_with_stall(
     let start = random_start(nf, m, opts.dual_blocks(), opts.seed);
     let stop = LbfgsStop {
         tol: WARM_GAP.max(opts.tol),
-        // Partition of unity only: the box rounds of the 7.7k armadillo took one more (66) with
-        // it.
+        // Partition of unity only: with it the box rounds of the 7.7k armadillo took 66, not 65.
         settled: (opts.partition_of_unity && SETTLED.gap > opts.tol).then_some(SETTLED),
     };
     let u_warm = run_lbfgs(prob, opts, stop, start, best, info, progress)?;
