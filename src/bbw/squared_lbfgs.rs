@@ -11,6 +11,7 @@ use super::dual::{box_eval, pou_eval, project_box, project_pou, DualPoint};
 use super::lbfgs::{minimize, LbfgsOptions, Step};
 use super::options::{BbwInfo, BbwOptions};
 use super::problem::EliminatedProblem;
+use super::vector;
 use crate::error::SkinResult;
 use crate::progress::{Event, Progress};
 use crate::rng::Rng;
@@ -48,8 +49,7 @@ impl SupportWatch {
     /// Whether the support of `w` (projected weights) has settled; remembers it for the next
     /// check.
     fn settled(&mut self, w: &[f64]) -> bool {
-        let above = self.rule.above;
-        let support: Vec<bool> = w.par_iter().map(|&x| x > above).collect();
+        let support = vector::above(w, self.rule.above);
         let size = support.par_iter().filter(|&&s| s).count();
         let changed = if self.previous.len() == support.len() {
             support

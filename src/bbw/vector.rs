@@ -21,6 +21,11 @@ fn ordered_sum<const K: usize>(parts: Vec<[f64; K]>) -> [f64; K] {
     })
 }
 
+/// Which entries of `w` are above `threshold` (a support read off weights).
+pub fn above(w: &[f64], threshold: f64) -> Vec<bool> {
+    w.par_iter().map(|&x| x > threshold).collect()
+}
+
 /// `<a, b>`.
 pub fn dot(a: &[f64], b: &[f64]) -> f64 {
     let parts: Vec<[f64; 1]> = a

@@ -18,6 +18,7 @@ use crate::bbw::bounds::CertifiedBounds;
 use crate::bbw::dual::{pou_eval, project_pou};
 use crate::bbw::options::{BbwInfo, BbwOptions};
 use crate::bbw::problem::EliminatedProblem;
+use crate::bbw::vector::above;
 use crate::error::SkinResult;
 use crate::progress::{Event, Progress};
 
@@ -62,11 +63,6 @@ fn smoothed_support(smoothed_above: &[bool], mut rules: Vec<bool>) -> Vec<bool> 
     rules
 }
 
-/// Which entries of `w` are above `threshold`.
-fn above(w: &[f64], threshold: f64) -> Vec<bool> {
-    w.par_iter().map(|&x| x > threshold).collect()
-}
-
 /// The rounds' state, kept across an L-BFGS intermission: the support guess
 /// (`support[j * nf + i]`), the partition-of-unity multiplier, the CG tolerance and the
 /// smoother's plan of `A`'s rows.
@@ -89,7 +85,7 @@ impl RoundsState {
         // The warm start is only accurate to its gap: weights below it are mostly the smooth
         // tails of W(Y) (eq. 15) over regions that are zero at the optimum, and leaving them
         // out of the first support saves rounds.
-        let mut support: Vec<bool> = w.iter().map(|&x| x > first_above).collect();
+        let mut support = above(&w, first_above);
         for i in 0..nf {
             // Every row needs a support entry; its largest weight is the safest.
             let jmax = (0..m)
@@ -261,7 +257,8 @@ pub(super) fn pou_rounds(
 
 #[cfg(test)]
 mod tests {
-    use super::{above, smoothed_support};
+    use super::smoothed_support;
+    use crate::bbw::vector::above;
 
     #[test]
     fn an_entry_leaves_only_where_smoother_and_rules_both_drop_it() {
